@@ -33,7 +33,14 @@ extension = Extension(
     + [f[2:] for f in compile_flags if f.startswith("-I")],
     library_dirs=[f[2:] for f in link_flags if f.startswith("-L")],
     libraries=["fftw3_mpi", "fftw3", "m"] + [f[2:] for f in link_flags if f.startswith("-l")],
-    extra_compile_args=["-O3", "-Wno-unused-function"],
+    extra_compile_args=["-O3", "-fno-math-errno", "-Wno-unused-function"],
+    define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
+)
+
+kernels = Extension(
+    "petgap._kernels",
+    sources=["petgap/_kernels.pyx"],
+    extra_compile_args=["-O3", "-fno-math-errno", "-Wno-unused-function"],
     define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
 )
 
@@ -42,7 +49,7 @@ setup(
     version="0.1.0",
     description="Gap distributions and adhesion of rough elastic contacts (PETSc/TAO, FFTW-MPI)",
     packages=find_packages(include=["petgap", "petgap.*", "postprocess", "postprocess.*"]),
-    ext_modules=cythonize([extension], language_level=3,
+    ext_modules=cythonize([extension, kernels], language_level=3,
                           compiler_directives={"boundscheck": False, "wraparound": False,
                                                "cdivision": True, "initializedcheck": False}),
     python_requires=">=3.11",

@@ -166,10 +166,12 @@ def multiply_by_qpower(double complex[:, ::1] c, const double[::1] qx,
 
     ``power`` is +1 (stiffness) or -1 (compliance).  Where ``|q| = 0`` the
     result is set to zero: the q = 0 mode is never touched by an elastic
-    operator (it is the rigid-body mode, fixed by the control).
+    operator (it is the rigid-body mode, fixed by the control).  The inner loop
+    is branch-free so that the compiler vectorises the square roots.
     """
     cdef Py_ssize_t i, j, nj = c.shape[0], ni = c.shape[1]
-    cdef double q2, f, qyj
+    cdef double qyj, f
+    cdef double *row
     if qx.shape[0] != ni or qy.shape[0] != nj:
         raise ValueError("wavevector arrays do not match the Fourier slab")
     if power != 1 and power != -1:
@@ -177,14 +179,21 @@ def multiply_by_qpower(double complex[:, ::1] c, const double[::1] qx,
     with nogil:
         for j in range(nj):
             qyj = qy[j] * qy[j]
-            for i in range(ni):
-                q2 = qx[i] * qx[i] + qyj
-                if q2 == 0.0:
-                    c[j, i] = 0.0
-                elif power == 1:
-                    c[j, i] = c[j, i] * (scale * sqrt(q2))
-                else:
-                    c[j, i] = c[j, i] * (scale / sqrt(q2))
+            row = <double *>&c[j, 0]
+            if power == 1:
+                for i in range(ni):
+                    f = scale * sqrt(qx[i] * qx[i] + qyj)
+                    row[2 * i] = row[2 * i] * f
+                    row[2 * i + 1] = row[2 * i + 1] * f
+            else:
+                for i in range(ni):
+                    f = scale / sqrt(qx[i] * qx[i] + qyj)
+                    row[2 * i] = row[2 * i] * f
+                    row[2 * i + 1] = row[2 * i + 1] * f
+            if qyj == 0.0:
+                for i in range(ni):
+                    if qx[i] == 0.0:
+                        c[j, i] = 0.0
 
 
 def weighted_power(const double complex[:, ::1] c, const double[::1] qx,

@@ -8,11 +8,13 @@ source "$(dirname "${BASH_SOURCE[0]}")/bootstrap.sh"
 cd "$PETGAP_ROOT"
 log=$(mktemp -d)/rank-logs
 mkdir -p "$log"
+# Run the whole suite unless test paths are given.
+case " $* " in *" tests"*) ;; *) set -- tests "$@" ;; esac
 status=0
 timeout --signal=TERM --kill-after=30 ${PETGAP_TEST_TIMEOUT:-2400} \
   mpirun -n 2 bash -c 'if [ "$OMPI_COMM_WORLD_RANK" = 0 ]; then exec python -m pytest "$@";
                        else exec python -m pytest "$@" > "'"$log"'/rank-$OMPI_COMM_WORLD_RANK.txt" 2>&1; fi' \
-  pytest -p no:cacheprovider --color=no tests "$@" || status=$?
+  pytest -p no:cacheprovider --color=no "$@" || status=$?
 if [ "$status" -ne 0 ]; then
   for f in "$log"/rank-*.txt; do
     [ -f "$f" ] && { echo "===== output of ${f##*/} (last 60 lines) ====="; tail -n 60 "$f"; }

@@ -1,0 +1,234 @@
+"""The contact problem: a rigid rough surface against a periodic elastic half-space.
+
+Formulation (GUIDE section 4)
+-----------------------------
+The gap is ``g(x) = d + u(x) - h(x) >= 0`` with ``h`` the rigid topography,
+``u`` the elastic displacement (positive away from the rigid surface) and ``d``
+the rigid-body separation.  Since the half-space operator only sees the
+fluctuation of ``u``, the elastic pressure is a function of the gap alone::
+
+    p_el = K (g + h),        zero mean, K = E* |q| / 2 in Fourier space.
+
+The total pressure is ``p = P0 + p_el`` (positive in compression), ``P0`` the
+mean pressure.  Energies are per cell (``dx dy`` weights).
+
+* Load control: minimise ``E_el(g) + E_int(g) + P0 A0 mean(g)`` over ``g >= 0``.
+  Its gradient, divided by the pixel area, is ``p_el + P0 + v'(g) = p + v'(g)``.
+* Mean-gap control: minimise ``E_el + E_int`` over ``g >= 0`` with
+  ``mean(g) = g_bar``; ``P0`` is the Lagrange multiplier.
+
+KKT conditions: ``p + v'(g) = 0`` where ``g > 0`` and ``p + v'(0) >= 0`` where
+``g = 0`` (repulsive contact).  A solution is judged by two unit-free residuals
+(:meth:`ContactProblem.kkt_residuals`): the largest violation in pressure
+relative to ``h0' E*`` and the largest violation in gap relative to ``h0``.
+"""
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from mpi4py import MPI
+
+from ._fftw_mpi import weighted_power
+from .interaction import HardWall
+
+
+@dataclass(frozen=True)
+class Load:
+    """Load control: prescribed mean pressure ``P0`` (positive in compression)."""
+
+    mean_pressure: float
+    kind = "load"
+
+    @property
+    def value(self):
+        return self.mean_pressure
+
+
+@dataclass(frozen=True)
+class MeanGap:
+    """Mean-gap control: prescribed ``mean(g)`` (the mean pressure follows)."""
+
+    mean_gap: float
+    kind = "mean-gap"
+
+    @property
+    def value(self):
+        return self.mean_gap
+
+
+@dataclass
+class ContactSolution:
+    """A solved (or not) contact state and how it was reached.
+
+    Fields are this rank's slabs; scalars are global.  ``converged`` is False
+    whenever the tolerance was not met (for instance at the iteration limit);
+    ``reason`` then says why the solver stopped.
+    """
+
+    gap: np.ndarray
+    pressure: np.ndarray
+    control: object
+    mean_gap: float
+    mean_pressure: float
+    contact_fraction: float
+    elastic_energy: float
+    interaction_energy: float
+    kappa_rep: float
+    kkt_pressure: float
+    kkt_gap: float
+    converged: bool
+    reason: str
+    solver: str
+    iterations: int
+    operator_applications: int
+    wall_time: float
+    history: list = field(default_factory=list, repr=False)
+
+    def scalars(self):
+        """The scalar results as a flat dict (for HDF5 attributes and tables)."""
+        out = {k: getattr(self, k) for k in (
+            "mean_gap", "mean_pressure", "contact_fraction", "elastic_energy",
+            "interaction_energy", "kappa_rep", "kkt_pressure", "kkt_gap", "converged",
+            "reason", "solver", "iterations", "operator_applications", "wall_time")}
+        out["control"] = self.control.kind
+        out["control_value"] = self.control.value
+        return out
+
+
+class ContactProblem:
+    """Everything a solver needs to know about one contact configuration.
+
+    Parameters
+    ----------
+    grid : petgap.grid.Grid
+    topography : ndarray, shape ``grid.local_shape``
+        This rank's slab of the rigid surface heights ``h``.
+    half_space : petgap.elastic.ElasticHalfSpace
+    interaction : HardWall or ExponentialAdhesion, optional
+        Default: hard wall only.
+    """
+
+    def __init__(self, grid, topography, half_space, interaction=None):
+        if topography.shape != grid.local_shape:
+            raise ValueError(f"topography slab has shape {topography.shape}, "
+                             f"grid expects {grid.local_shape}")
+        self.grid = grid
+        self.half_space = half_space
+        self.interaction = interaction or HardWall()
+        self.topography = np.ascontiguousarray(topography, dtype=float)
+        self.mean_height = grid.mean(self.topography)
+        # Spectral statistics set the unit-free residual scales.
+        grid.forward(self.topography)
+        comm = grid.comm
+        power0 = comm.allreduce(weighted_power(grid.fourier, grid.qx, grid.qy,
+                                               grid.hermitian_weight, 0))
+        power2 = comm.allreduce(weighted_power(grid.fourier, grid.qx, grid.qy,
+                                               grid.hermitian_weight, 2))
+        n = grid.npoints
+        self.rms_height = float(np.sqrt(max(power0 / n ** 2 - self.mean_height ** 2, 0.0)))
+        self.rms_slope = float(np.sqrt(power2) / n)
+        if not (self.rms_height > 0 and self.rms_slope > 0):
+            raise ValueError("the topography is flat: contact of a flat surface has no "
+                             "rough-contact solution (rms height and slope are zero)")
+        #: Pressure scale of the KKT residual, ``h0' E*``.
+        self.pressure_scale = self.rms_slope * half_space.contact_modulus
+        #: Gap scale of the KKT residual, ``h0``.
+        self.gap_scale = self.rms_height
+        self.operator_applications = 0
+
+    # ------------------------------------------------------------ operators
+    def elastic_pressure(self, gap, out=None):
+        """Zero-mean elastic pressure ``K (g + h)`` (one transform pair)."""
+        self.operator_applications += 1
+        buf = self.grid.real
+        np.add(gap, self.topography, out=buf)
+        return self.half_space._apply(buf, self.half_space._stiffness, 1, out)
+
+    def displacement(self, pressure, out=None):
+        """Zero-mean displacement ``K^{-1} p`` (one transform pair)."""
+        self.operator_applications += 1
+        return self.half_space.displacement(pressure, out)
+
+    def objective_gradient(self, gap, gradient, mean_pressure):
+        """Load-control objective and its gradient (per pixel area, i.e. a pressure).
+
+        Parameters
+        ----------
+        gap : ndarray
+            This rank's gap slab.
+        gradient : ndarray
+            Filled with ``p_el + P0 + v'(g)``, the gradient divided by ``dx dy``.
+        mean_pressure : float
+            ``P0``.
+
+        Returns
+        -------
+        float
+            ``E_el + E_int + P0 A0 mean(g)`` (same on all ranks).
+        """
+        self.elastic_pressure(gap, out=gradient)
+        local = 0.5 * np.vdot(gap + self.topography, gradient) + mean_pressure * gap.sum()
+        if self.interaction.adhesive:
+            local += self.interaction.energy(gap).sum()
+            gradient += self.interaction.derivative(gap)
+        gradient += mean_pressure
+        return self.grid.pixel_area * self.grid.comm.allreduce(float(local))
+
+    # ------------------------------------------------------------ judgement
+    def kkt_residuals(self, gap, pressure, contact):
+        """Unit-free KKT residuals of a state ``(g, p)`` with contact set ``contact``.
+
+        Returns
+        -------
+        (float, float)
+            ``max violation in pressure / (h0' E*)`` -- non-zero pressure (plus
+            interaction stress) off contact, tension in contact -- and
+            ``max violation in gap / h0`` -- gap in contact, penetration off it.
+        """
+        stress = pressure
+        if self.interaction.adhesive:
+            stress = pressure + self.interaction.derivative(gap)
+        free = ~contact
+        rp = max(_max_or_zero(np.abs(stress[free])), _max_or_zero(-stress[contact]))
+        rg = max(_max_or_zero(np.abs(gap[contact])), _max_or_zero(-gap[free]))
+        pair = np.array([rp, rg])
+        self.grid.comm.Allreduce(MPI.IN_PLACE, pair, op=MPI.MAX)
+        return pair[0] / self.pressure_scale, pair[1] / self.gap_scale
+
+    def make_solution(self, gap, pressure, contact, control, *, converged, reason, solver,
+                      iterations, operator_applications, wall_time, history=()):
+        """Assemble a :class:`ContactSolution` with all derived quantities."""
+        grid = self.grid
+        kkt_p, kkt_g = self.kkt_residuals(gap, pressure, contact)
+        repulsive = contact & (pressure > 0)
+        local = np.array([gap.sum(), pressure.sum(), np.count_nonzero(repulsive),
+                          self.interaction.energy(gap).sum() if self.interaction.adhesive else 0.0])
+        total = np.empty_like(local)
+        grid.comm.Allreduce(local, total)
+        n = grid.npoints
+        mean_gap, mean_pressure, c = total[0] / n, total[1] / n, total[2] / n
+        displacement = gap + self.topography  # up to a constant: energy ignores it
+        elastic = self.half_space.energy(displacement)
+        kappa = c * self.pressure_scale / mean_pressure if mean_pressure > 0 else float("nan")
+        return ContactSolution(
+            gap=gap, pressure=pressure, control=control, mean_gap=mean_gap,
+            mean_pressure=mean_pressure, contact_fraction=c, elastic_energy=elastic,
+            interaction_energy=grid.pixel_area * total[3], kappa_rep=kappa,
+            kkt_pressure=kkt_p, kkt_gap=kkt_g, converged=bool(converged), reason=str(reason),
+            solver=solver, iterations=int(iterations),
+            operator_applications=int(operator_applications), wall_time=float(wall_time),
+            history=list(history))
+
+
+def _max_or_zero(values):
+    return float(values.max()) if values.size else 0.0
+
+
+class Timer:
+    """Wall-clock seconds since construction (``time.perf_counter``)."""
+
+    def __init__(self):
+        self.start = time.perf_counter()
+
+    def __call__(self):
+        return time.perf_counter() - self.start

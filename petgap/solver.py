@@ -1,0 +1,349 @@
+"""Solving a contact problem with PETSc TAO, and sweeps of controls.
+
+The TAO object is created for every solve with the solution Vec laid out as
+the grid's real-space slab, and ``setFromOptions()`` is called last, so the
+PETSc options database (``-tao_type``, ``-tao_monitor``, ``-tao_max_it``,
+``-tao_view``, ``-log_view``...) has the final word, as every PETSc user expects.
+
+Solver types
+------------
+``pcg`` (default, a TAO ``python`` type)
+    Preconditioned Polonsky-Keer conjugate gradients on the pressure
+    (:mod:`petgap.polonsky_keer`), load or mean-gap control, non-adhesive.
+``bncg``, ``blmvm``, ``bqnls``, ``gpcg`` (TAO built-ins)
+    Bound-constrained minimisation over the gap ``g >= 0`` of the load-control
+    energy :meth:`petgap.contact.ContactProblem.objective_gradient`.  Mean-gap
+    control wraps them in an exact multiplier update: the mean pressure ``P0``
+    is adjusted by a secant iteration on ``log P0`` until the mean gap matches.
+
+Every type stops on the same unit-free KKT test (largest pressure violation
+over ``h0' E*`` and gap violation over ``h0`` below ``tolerance``), never on
+TAO's unit-dependent gradient norms, and reports ``converged=False`` with
+TAO's reason when it stops for any other cause.
+"""
+import math
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from .contact import Load, MeanGap, Timer
+from .polonsky_keer import polonsky_keer
+
+#: Solver types a scene may name.
+SOLVER_TYPES = ("pcg", "bncg", "blmvm", "bqnls", "gpcg")
+_REASONS = {v: k for k, v in vars(PETSc.TAO.Reason).items() if not k.startswith("_")}
+
+
+class _PolonskyKeerTao:
+    """TAO ``python`` context running :func:`polonsky_keer` on the problem."""
+
+    def __init__(self, problem, control, tolerance, initial, monitor):
+        self.problem, self.control = problem, control
+        self.tolerance, self.initial, self.monitor = tolerance, initial, monitor
+        self.solution = None
+
+    def solve(self, tao):
+        def report(it, residual):
+            tao.monitor(its=it, f=0.0, res=residual)
+            if self.monitor is not None:
+                self.monitor(it, residual)
+        self.solution = polonsky_keer(self.problem, self.control, tolerance=self.tolerance,
+                                      max_iterations=tao.getMaximumIterations(),
+                                      initial_pressure=self.initial, monitor=report)
+        x = tao.getSolution()
+        x.getArray()[:] = self.solution.gap.ravel()
+        tao.setIterationNumber(self.solution.iterations)
+        tao.setConvergedReason(PETSc.TAO.Reason.CONVERGED_USER if self.solution.converged
+                               else PETSc.TAO.Reason.DIVERGED_MAXITS)
+
+    def view(self, tao, viewer):
+        viewer.printfASCII("petgap preconditioned Polonsky-Keer conjugate gradients\n")
+
+
+def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=10000,
+          initial=None, options=None, monitor=None):
+    """Solve one contact problem.
+
+    Parameters
+    ----------
+    problem : petgap.contact.ContactProblem
+    control : petgap.contact.Load or petgap.contact.MeanGap
+    solver : str
+        One of :data:`SOLVER_TYPES`; ``-tao_type`` in the options overrides it.
+    tolerance : float
+        Unit-free KKT tolerance.
+    max_iterations : int
+        Per TAO solve (``-tao_max_it`` overrides).
+    initial : petgap.contact.ContactSolution, optional
+        Warm start: the previous state of a sweep.
+    options : dict, optional
+        PETSc options (without the leading dash) set for this solve only.
+    monitor : callable, optional
+        ``monitor(iteration, residual)``, called on every rank.
+
+    Returns
+    -------
+    petgap.contact.ContactSolution
+    """
+    if solver not in SOLVER_TYPES:
+        raise ValueError(f"solver {solver!r} is not one of {', '.join(SOLVER_TYPES)}")
+    if not (isinstance(tolerance, float) or isinstance(tolerance, int)) or not 0 < tolerance < 1:
+        raise ValueError(f"tolerance must be in (0, 1), got {tolerance!r}")
+    with _options(options):
+        tao_type = PETSc.Options().getString("tao_type", solver)
+    if tao_type == "python":
+        tao_type = "pcg"
+    if tao_type not in SOLVER_TYPES:
+        raise ValueError(f"-tao_type {tao_type} is not supported; use one of {', '.join(SOLVER_TYPES)}")
+    if tao_type == "pcg" and problem.interaction.adhesive:
+        raise ValueError("solver 'pcg' (pressure-based Polonsky-Keer) is for non-adhesive contact; "
+                         "use bncg or blmvm for adhesion")
+    if isinstance(control, MeanGap) and tao_type != "pcg":
+        return _solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance,
+                                             max_iterations, initial, options, monitor)
+    return _tao_solve(problem, control, tao_type, tolerance, max_iterations, initial, options,
+                      monitor)
+
+
+def sweep(problem, controls, **kwargs):
+    """Solve a list of controls in order, each warm-started from the previous one.
+
+    Yields each :class:`~petgap.contact.ContactSolution` as soon as it is done,
+    so the caller can store it before the next step starts.
+    """
+    previous = kwargs.pop("initial", None)
+    for control in controls:
+        previous = solve(problem, control, initial=previous, **kwargs)
+        yield previous
+
+
+# --------------------------------------------------------------------- TAO
+def _tao_solve(problem, control, tao_type, tolerance, max_iterations, initial, options, monitor):
+    grid = problem.grid
+    comm = grid.comm
+    timer = Timer()
+    nloc = grid.local_shape[0] * grid.local_shape[1]
+    x = PETSc.Vec().createMPI((nloc, grid.npoints), comm=comm)
+    tao = PETSc.TAO().create(comm=comm)
+    try:
+        tao.setSolution(x)
+        tao.setMaximumIterations(max_iterations)
+        if tao_type == "pcg":
+            context = _PolonskyKeerTao(problem, control, tolerance,
+                                       None if initial is None else initial.pressure, monitor)
+            tao.setType(PETSc.TAO.Type.PYTHON)
+            tao.setPythonContext(context)
+            with _options(options):
+                tao.setFromOptions()
+            tao.solve()
+            solution = context.solution
+            solution.wall_time = timer()
+            return solution
+        return _gap_tao(problem, control, tao, x, tao_type, tolerance, initial, options,
+                        monitor, timer)
+    finally:
+        tao.destroy()
+        x.destroy()
+
+
+def _gap_tao(problem, control, tao, x, tao_type, tolerance, initial, options, monitor, timer):
+    grid = problem.grid
+    shape = grid.local_shape
+    mean_pressure = float(control.mean_pressure)
+    if mean_pressure < 0 and not problem.interaction.adhesive:
+        raise ValueError(f"mean pressure {mean_pressure} < 0: a non-adhesive interface cannot "
+                         f"carry a tensile load")
+    area = grid.pixel_area
+    gradient = x.duplicate()
+    lower = x.duplicate()
+    upper = x.duplicate()
+    lower.set(0.0)
+    upper.set(PETSc.INFINITY)
+    start_ops = problem.operator_applications
+    gap = x.getArray().reshape(shape)
+    if initial is not None:
+        gap[...] = np.maximum(initial.gap, 0.0)
+    else:
+        # Rigid approach to the highest point: a feasible start.
+        top = grid.comm.allreduce(float(problem.topography.max()), op=MPI.MAX)
+        gap[...] = top - problem.topography
+    # TAO hands its convergence test a *projected* gradient (zero on active
+    # bounds), which would hide tension at contact points.  The residual is
+    # therefore computed inside the objective callback from the full gradient
+    # and matched to the accepted iterate by a fingerprint of the gap field.
+    cache = {}
+
+    def kkt(g, grad):
+        local = max(np.max(np.abs(grad[g > 0]), initial=0.0),
+                    np.max(-grad[g <= 0], initial=0.0)) / area
+        return grid.comm.allreduce(float(local), op=MPI.MAX) / problem.pressure_scale
+
+    def fingerprint(g):
+        return (float(g.sum()), float(np.vdot(g, g)))
+
+    def objective_gradient(tao, xv, gv):
+        g = xv.getArray(readonly=True).reshape(shape)
+        grad = gv.getArray().reshape(shape)
+        f = problem.objective_gradient(g, grad, mean_pressure)
+        grad *= area
+        cache["key"], cache["residual"] = fingerprint(g), kkt(g, grad)
+        return f
+
+    def convergence_test(tao):
+        g = x.getArray(readonly=True).reshape(shape)
+        same = grid.comm.allreduce(fingerprint(g) == cache.get("key"), op=MPI.LAND)
+        if not same:  # the last evaluation was not at the accepted point
+            grad = gradient.getArray().reshape(shape)
+            problem.objective_gradient(g, grad, mean_pressure)
+            grad *= area
+            cache["key"], cache["residual"] = fingerprint(g), kkt(g, grad)
+        residual = cache["residual"]
+        it = tao.getIterationNumber()
+        if monitor is not None:
+            monitor(it, residual)
+        if not np.isfinite(residual):
+            tao.setConvergedReason(PETSc.TAO.Reason.DIVERGED_NAN)
+        elif residual <= tolerance:
+            tao.setConvergedReason(PETSc.TAO.Reason.CONVERGED_USER)
+        elif it >= tao.getMaximumIterations():
+            tao.setConvergedReason(PETSc.TAO.Reason.DIVERGED_MAXITS)
+        else:
+            tao.setConvergedReason(PETSc.TAO.Reason.CONTINUE_ITERATING)
+
+    hessian = PETSc.Mat().createPython(((x.getLocalSize(), x.getSize()),) * 2,
+                                       GapHessian(problem, shape), comm=grid.comm)
+    hessian.setUp()
+
+    def update_hessian(tao, xv, H, P):
+        H.getPythonContext().set_point(xv.getArray(readonly=True).reshape(shape))
+
+    try:
+        tao.setType(tao_type)
+        tao.setObjectiveGradient(objective_gradient, gradient)
+        tao.setHessian(update_hessian, hessian)
+        tao.setVariableBounds((lower, upper))
+        tao.setConvergenceTest(convergence_test)
+        tao.setTolerances(gatol=0.0, grtol=0.0, gttol=0.0)
+        ksp = tao.getKSP()
+        if ksp is not None and ksp.handle:
+            ksp.getPC().setType("none")  # matrix-free Hessian: no entries to factor
+        with _options(options):
+            tao.setFromOptions()
+        tao.solve()
+        reason_code = tao.getConvergedReason()
+        reason = _REASONS.get(reason_code, str(reason_code)).lower()
+        converged = reason_code == PETSc.TAO.Reason.CONVERGED_USER
+        g = x.getArray(readonly=True).reshape(shape).copy()
+        pressure = problem.elastic_pressure(g) + mean_pressure
+        return problem.make_solution(
+            g, pressure, g <= 0, control, converged=converged,
+            reason="converged_kkt" if converged else reason, solver=tao_type,
+            iterations=tao.getIterationNumber(),
+            operator_applications=problem.operator_applications - start_ops,
+            wall_time=timer())
+    finally:
+        for v in (gradient, lower, upper, hessian):
+            v.destroy()
+
+
+def _solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance, max_iterations,
+                                  initial, options, monitor, max_outer=60):
+    """Mean-gap control for gap-space TAO types: secant on log(P0) until mean(g) = g_bar."""
+    timer = Timer()
+    target = float(control.mean_gap)
+    if not target >= 0:
+        raise ValueError(f"mean gap {target} < 0 is impossible with a hard wall (gap >= 0)")
+    h0 = problem.gap_scale
+    start_ops = problem.operator_applications
+    iterations = 0
+    history = []
+    # Starting guess: the previous multiplier, or a typical rough-contact pressure.
+    pressure = initial.mean_pressure if initial is not None and initial.mean_pressure > 0 \
+        else 0.01 * problem.pressure_scale
+    points = []
+    solution = initial
+    for outer in range(max_outer):
+        solution = _tao_solve(problem, Load(pressure), tao_type, tolerance, max_iterations,
+                              solution, options, monitor)
+        iterations += solution.iterations
+        error = (solution.mean_gap - target) / h0
+        history.append((pressure, solution.mean_gap))
+        if not solution.converged or abs(error) <= tolerance:
+            break
+        points.append((math.log(pressure), solution.mean_gap))
+        if len(points) == 1:
+            # mean gap ~ -gamma h0 log P with gamma ~ 0.5 for rough contact
+            log_p = points[0][0] + (points[0][1] - target) / (0.5 * h0)
+        else:
+            (l1, g1), (l2, g2) = points[-2], points[-1]
+            slope = (g2 - g1) / (l2 - l1) if l2 != l1 else -0.5 * h0
+            if not slope < 0:
+                slope = -0.5 * h0
+            log_p = l2 + (target - g2) / slope
+        pressure = math.exp(min(max(log_p, points[-1][0] - 5.0), points[-1][0] + 5.0))
+    converged = solution.converged and abs((solution.mean_gap - target) / h0) <= tolerance
+    reason = "converged_kkt" if converged else (solution.reason if not solution.converged
+                                                else "multiplier_not_converged")
+    result = problem.make_solution(
+        solution.gap, solution.pressure, solution.gap <= 0, control, converged=converged,
+        reason=reason, solver=f"{tao_type}+multiplier", iterations=iterations,
+        operator_applications=problem.operator_applications - start_ops, wall_time=timer(),
+        history=history)
+    return result
+
+
+class GapHessian:
+    """Matrix-free Hessian of the gap energy, a PETSc ``python`` Mat context.
+
+    ``H v = dx dy (K v + v''(g) v)``: the half-space stiffness plus, for an
+    adhesive interaction, its curvature at the current gap (set by TAO through
+    :meth:`set_point`).  Symmetric; positive definite on zero-mean fields for
+    the hard wall.
+    """
+
+    def __init__(self, problem, shape):
+        self.problem, self.shape = problem, shape
+        self.curvature = None
+
+    def set_point(self, gap):
+        interaction = self.problem.interaction
+        self.curvature = interaction.curvature(gap).copy() if interaction.adhesive else None
+
+    def mult(self, mat, xv, yv):
+        problem = self.problem
+        v = xv.getArray(readonly=True).reshape(self.shape)
+        y = yv.getArray().reshape(self.shape)
+        problem.operator_applications += 1
+        problem.half_space.pressure(v, out=y)
+        if self.curvature is not None:
+            y += self.curvature * v
+        y *= problem.grid.pixel_area
+
+    def multTranspose(self, mat, xv, yv):
+        self.mult(mat, xv, yv)
+
+
+class _options:
+    """Push PETSc options for the duration of a ``with`` block, then restore them."""
+
+    def __init__(self, options):
+        self.options = {str(k).lstrip("-"): ("" if v is None else str(v))
+                        for k, v in (options or {}).items()}
+        self.saved = {}
+
+    def __enter__(self):
+        db = PETSc.Options()
+        for key, value in self.options.items():
+            self.saved[key] = db.getString(key, None) if db.hasName(key) else None
+            db.setValue(key, value)
+        return db
+
+    def __exit__(self, *exc):
+        db = PETSc.Options()
+        for key, old in self.saved.items():
+            if old is None:
+                db.delValue(key)
+            else:
+                db.setValue(key, old)
+        return False
