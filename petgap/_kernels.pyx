@@ -189,3 +189,195 @@ def pk_preconditioned_direction(double[:, ::1] real, const double[:, ::1] p,
                     v = 0.0
                 t[i, j] = v
                 real[i, j] = v
+
+
+# ---------------------------------------------------------------------------
+# Gap-space preconditioned projected CG (petgap.gap_cg).  The gradient of the
+# energy per pixel area is ``grad = p_el + v'(g)`` with ``v'(g) = (w / rho)
+# exp(-g / rho)`` (``w = 0``: hard wall).  The free set F is ``g > 0`` or
+# ``grad + lam_f < 0`` (points at the wall that are pulled off it).
+from libc.math cimport exp
+
+
+cdef inline double _grad(double pel, double g, double wr, double rho) nogil:
+    if wr != 0.0:
+        return pel + wr * exp(-g / rho)
+    return pel
+
+
+def gcg_open_sums(const double[:, ::1] pel, const double[:, ::1] g, double w, double rho):
+    """Returns ``(sum of grad over g > 0, count of g > 0)``: the multiplier estimate."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double s = 0.0, wr = w / rho if w != 0.0 else 0.0
+    cdef long count = 0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                if g[i, j] > 0.0:
+                    s += _grad(pel[i, j], g[i, j], wr, rho)
+                    count += 1
+    return s, count
+
+
+def gcg_free_sums(const double[:, ::1] pel, const double[:, ::1] g, double lam_f,
+                  double w, double rho):
+    """Returns ``(sum_F grad, count_F, max_F grad, min_F grad)``."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double gr, s = 0.0, gmax = -INFINITY, gmin = INFINITY
+    cdef double wr = w / rho if w != 0.0 else 0.0
+    cdef long count = 0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                gr = _grad(pel[i, j], g[i, j], wr, rho)
+                if g[i, j] > 0.0 or gr + lam_f < 0.0:
+                    s += gr
+                    count += 1
+                    if gr > gmax:
+                        gmax = gr
+                    if gr < gmin:
+                        gmin = gr
+    return s, count, gmax, gmin
+
+
+def gcg_write_residual(const double[:, ::1] pel, const double[:, ::1] g, double lam_f,
+                       double lam, double w, double rho, double[:, ::1] real):
+    """``real = grad + lam`` on F, 0 elsewhere (the residual to precondition)."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double gr, wr = w / rho if w != 0.0 else 0.0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                gr = _grad(pel[i, j], g[i, j], wr, rho)
+                if g[i, j] > 0.0 or gr + lam_f < 0.0:
+                    real[i, j] = gr + lam
+                else:
+                    real[i, j] = 0.0
+
+
+def gcg_precond_sums(const double[:, ::1] real, const double[:, ::1] pel,
+                     const double[:, ::1] g, double lam_f, double lam, double w, double rho):
+    """Returns ``(sum_F z, sum_F r z, sum_F r)`` with ``z = real``, ``r = grad + lam``."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double gr, z, sz = 0.0, srz = 0.0, sr = 0.0
+    cdef double wr = w / rho if w != 0.0 else 0.0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                gr = _grad(pel[i, j], g[i, j], wr, rho)
+                if g[i, j] > 0.0 or gr + lam_f < 0.0:
+                    z = real[i, j]
+                    sz += z
+                    srz += (gr + lam) * z
+                    sr += gr + lam
+    return sz, srz, sr
+
+
+def gcg_direction(double[:, ::1] real, const double[:, ::1] pel, const double[:, ::1] g,
+                  double[:, ::1] t, double lam_f, double zshift, double beta, double w,
+                  double rho):
+    """``t = -(z - zshift) + beta t`` on F, 0 elsewhere (``z = real``); then ``real = t``."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double gr, v, wr = w / rho if w != 0.0 else 0.0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                gr = _grad(pel[i, j], g[i, j], wr, rho)
+                if g[i, j] > 0.0 or gr + lam_f < 0.0:
+                    v = -(real[i, j] - zshift) + beta * t[i, j]
+                else:
+                    v = 0.0
+                t[i, j] = v
+                real[i, j] = v
+
+
+def gcg_curvature(const double[:, ::1] real, const double[:, ::1] t, const double[:, ::1] pel,
+                  const double[:, ::1] g, double lam, double w, double rho):
+    """Returns ``(t.K t + sum v''(g) t^2, sum (grad + lam) t, max |t|, min over t < 0 of g / -t)``.
+
+    ``real`` holds ``K t``.  The last value is the step at which the first
+    free point would reach the wall.
+    """
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double tv, e, curv = 0.0, slope = 0.0, tmax = 0.0, reach = INFINITY
+    cdef double wr = w / rho if w != 0.0 else 0.0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                tv = t[i, j]
+                if tv == 0.0:
+                    continue
+                curv += tv * real[i, j]
+                if wr != 0.0:
+                    e = wr * exp(-g[i, j] / rho)
+                    curv -= (e / rho) * tv * tv
+                    slope += (pel[i, j] + e + lam) * tv
+                else:
+                    slope += (pel[i, j] + lam) * tv
+                if fabs(tv) > tmax:
+                    tmax = fabs(tv)
+                if tv < 0.0 and g[i, j] / -tv < reach:
+                    reach = g[i, j] / -tv
+    return curv, slope, tmax, reach
+
+
+def gcg_step(double[:, ::1] g, const double[:, ::1] t, double tau):
+    """``g += tau t``; returns the number of points that went below zero."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double v
+    cdef long negative = 0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                v = g[i, j] + tau * t[i, j]
+                g[i, j] = v
+                if v < 0.0:
+                    negative += 1
+    return negative
+
+
+def axpy(double[:, ::1] y, const double[:, ::1] x, double a):
+    """``y += a x`` (x may be the padded FFT buffer)."""
+    cdef Py_ssize_t i, j, m = y.shape[0], n = y.shape[1]
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                y[i, j] += a * x[i, j]
+
+
+def shifted_positive_sums(const double[:, ::1] y, double mu):
+    """Returns ``(sum max(y + mu, 0), count(y + mu > 0))``: the mean-gap projection's Newton data."""
+    cdef Py_ssize_t i, j, m = y.shape[0], n = y.shape[1]
+    cdef double v, s = 0.0
+    cdef long count = 0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                v = y[i, j] + mu
+                if v > 0.0:
+                    s += v
+                    count += 1
+    return s, count
+
+
+def project_and_load(double[:, ::1] g, double mu, const double[:, ::1] h, double[:, ::1] real):
+    """``g = max(g + mu, 0)`` and ``real = g + h`` (ready for ``K (g + h)``)."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double v
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                v = g[i, j] + mu
+                if v < 0.0:
+                    v = 0.0
+                g[i, j] = v
+                real[i, j] = v + h[i, j]
+
+
+def copy_from(double[:, ::1] y, const double[:, ::1] x):
+    """``y = x`` (x may be the padded FFT buffer)."""
+    cdef Py_ssize_t i, j, m = y.shape[0], n = y.shape[1]
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                y[i, j] = x[i, j]

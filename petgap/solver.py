@@ -8,8 +8,14 @@ PETSc options database (``-tao_type``, ``-tao_monitor``, ``-tao_max_it``,
 Solver types
 ------------
 ``pcg`` (default, a TAO ``python`` type)
-    Preconditioned Polonsky-Keer conjugate gradients on the pressure
-    (:mod:`petgap.polonsky_keer`), load or mean-gap control, non-adhesive.
+    petgap's preconditioned projected conjugate gradients, in the formulation
+    that suits the problem: on the pressure (``pcg-pressure``,
+    :mod:`petgap.polonsky_keer`) for non-adhesive load control, on the gap
+    (``pcg-gap``, :mod:`petgap.gap_cg`) otherwise.  Adhesive load control is a
+    secant iteration on the mean gap around warm-started mean-gap solves, so
+    that each step reports which branch it landed on.
+``pcg-pressure``, ``pcg-gap``
+    Force one formulation.
 ``bncg``, ``blmvm``, ``bqnls``, ``gpcg`` (TAO built-ins)
     Bound-constrained minimisation over the gap ``g >= 0`` of the load-control
     energy :meth:`petgap.contact.ContactProblem.objective_gradient`.  Mean-gap
@@ -28,18 +34,20 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .contact import Load, MeanGap, Timer
+from .gap_cg import gap_cg
 from .polonsky_keer import polonsky_keer
 
 #: Solver types a scene may name.
-SOLVER_TYPES = ("pcg", "bncg", "blmvm", "bqnls", "gpcg")
+SOLVER_TYPES = ("pcg", "pcg-pressure", "pcg-gap", "bncg", "blmvm", "bqnls", "gpcg")
+PETGAP_TYPES = ("pcg", "pcg-pressure", "pcg-gap")
 _REASONS = {v: k for k, v in vars(PETSc.TAO.Reason).items() if not k.startswith("_")}
 
 
-class _PolonskyKeerTao:
-    """TAO ``python`` context running :func:`polonsky_keer` on the problem."""
+class _PetgapTao:
+    """TAO ``python`` context running one of petgap's own conjugate-gradient solvers."""
 
-    def __init__(self, problem, control, tolerance, initial, monitor):
-        self.problem, self.control = problem, control
+    def __init__(self, kind, problem, control, tolerance, initial, monitor):
+        self.kind, self.problem, self.control = kind, problem, control
         self.tolerance, self.initial, self.monitor = tolerance, initial, monitor
         self.solution = None
 
@@ -48,9 +56,16 @@ class _PolonskyKeerTao:
             tao.monitor(its=it, f=0.0, res=residual)
             if self.monitor is not None:
                 self.monitor(it, residual)
-        self.solution = polonsky_keer(self.problem, self.control, tolerance=self.tolerance,
-                                      max_iterations=tao.getMaximumIterations(),
-                                      initial_pressure=self.initial, monitor=report)
+        maxit = tao.getMaximumIterations()
+        if self.kind == "pcg-pressure":
+            self.solution = polonsky_keer(
+                self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
+                initial_pressure=None if self.initial is None else self.initial.pressure,
+                monitor=report)
+        else:
+            self.solution = gap_cg(
+                self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
+                initial_gap=None if self.initial is None else self.initial.gap, monitor=report)
         x = tao.getSolution()
         x.getArray()[:] = self.solution.gap.ravel()
         tao.setIterationNumber(self.solution.iterations)
@@ -58,7 +73,7 @@ class _PolonskyKeerTao:
                                else PETSc.TAO.Reason.DIVERGED_MAXITS)
 
     def view(self, tao, viewer):
-        viewer.printfASCII("petgap preconditioned Polonsky-Keer conjugate gradients\n")
+        viewer.printfASCII(f"petgap preconditioned projected conjugate gradients ({self.kind})\n")
 
 
 def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=10000,
@@ -96,10 +111,16 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
         tao_type = "pcg"
     if tao_type not in SOLVER_TYPES:
         raise ValueError(f"-tao_type {tao_type} is not supported; use one of {', '.join(SOLVER_TYPES)}")
-    if tao_type == "pcg" and problem.interaction.adhesive:
-        raise ValueError("solver 'pcg' (pressure-based Polonsky-Keer) is for non-adhesive contact; "
-                         "use bncg or blmvm for adhesion")
-    if isinstance(control, MeanGap) and tao_type != "pcg":
+    adhesive = problem.interaction.adhesive
+    if tao_type == "pcg":
+        tao_type = "pcg-pressure" if (isinstance(control, Load) and not adhesive) else "pcg-gap"
+    if tao_type == "pcg-pressure" and adhesive:
+        raise ValueError("solver 'pcg-pressure' (Polonsky-Keer on the pressure) is for "
+                         "non-adhesive contact; use pcg or pcg-gap for adhesion")
+    if isinstance(control, Load) and adhesive and tao_type == "pcg-gap":
+        return _solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial,
+                                       options, monitor)
+    if isinstance(control, MeanGap) and tao_type not in PETGAP_TYPES:
         return _solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance,
                                              max_iterations, initial, options, monitor)
     return _tao_solve(problem, control, tao_type, tolerance, max_iterations, initial, options,
@@ -129,9 +150,8 @@ def _tao_solve(problem, control, tao_type, tolerance, max_iterations, initial, o
     try:
         tao.setSolution(x)
         tao.setMaximumIterations(max_iterations)
-        if tao_type == "pcg":
-            context = _PolonskyKeerTao(problem, control, tolerance,
-                                       None if initial is None else initial.pressure, monitor)
+        if tao_type in PETGAP_TYPES:
+            context = _PetgapTao(tao_type, problem, control, tolerance, initial, monitor)
             tao.setType(PETSc.TAO.Type.PYTHON)
             tao.setPythonContext(context)
             with _options(options):
@@ -291,6 +311,72 @@ def _solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance, max_ite
         operator_applications=problem.operator_applications - start_ops, wall_time=timer(),
         history=history)
     return result
+
+
+def _solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial, options,
+                            monitor, max_outer=60):
+    """Adhesive load control: find the mean gap whose multiplier is the load.
+
+    A safeguarded secant (regula falsi once the root is bracketed) on
+    ``P(g_bar) - P0`` with warm-started mean-gap solves.  ``P(g_bar)`` of an
+    adhesive interface need not be monotone; the branch found is the one
+    connected to the starting gap (the previous step of a sweep, else the
+    non-adhesive solution at the same load), and is reported in ``history``.
+    """
+    from .contact import ContactProblem
+    timer = Timer()
+    target = float(control.mean_pressure)
+    h0 = problem.gap_scale
+    start_ops = problem.operator_applications
+    iterations = 0
+    if initial is not None:
+        gap_guess, state = initial.mean_gap, initial
+    else:
+        hard = ContactProblem.__new__(ContactProblem)
+        hard.__dict__.update(problem.__dict__)
+        from .interaction import HardWall
+        hard.interaction = HardWall()
+        seed = polonsky_keer(hard, Load(max(target, 1e-3 * problem.pressure_scale)),
+                             tolerance=max(tolerance, 1e-6), max_iterations=max_iterations)
+        problem.operator_applications = hard.operator_applications
+        iterations += seed.iterations
+        gap_guess, state = seed.mean_gap, seed
+    points, history = [], []
+    lo = hi = None  # brackets: (gap, P - P0) with opposite signs
+    solution = state
+    for outer in range(max_outer):
+        solution = _tao_solve(problem, MeanGap(max(gap_guess, 0.0)), "pcg-gap", tolerance,
+                              max_iterations, solution, options, monitor)
+        iterations += solution.iterations
+        f = solution.mean_pressure - target
+        history.append((solution.mean_gap, solution.mean_pressure))
+        if not solution.converged or abs(f) <= tolerance * problem.pressure_scale:
+            break
+        points.append((solution.mean_gap, f))
+        if f > 0:
+            lo = (solution.mean_gap, f) if lo is None or solution.mean_gap > lo[0] else lo
+        else:
+            hi = (solution.mean_gap, f) if hi is None or solution.mean_gap < hi[0] else hi
+        if len(points) == 1:
+            # stiffness estimate of rough contact: dP/dg ~ -P / (0.5 h0)
+            slope = -max(abs(solution.mean_pressure), 1e-3 * problem.pressure_scale) / (0.5 * h0)
+        else:
+            (g1, f1), (g2, f2) = points[-2], points[-1]
+            slope = (f2 - f1) / (g2 - g1) if g2 != g1 else -problem.pressure_scale / h0
+        step = -f / slope if slope < 0 else (0.5 * h0 if f > 0 else -0.5 * h0)
+        gap_guess = solution.mean_gap + max(min(step, h0), -h0)
+        if lo is not None and hi is not None and not (min(lo[0], hi[0]) < gap_guess < max(lo[0], hi[0])):
+            # regula falsi inside the bracket
+            gap_guess = lo[0] - lo[1] * (hi[0] - lo[0]) / (hi[1] - lo[1])
+    converged = solution.converged and abs(solution.mean_pressure - target) <= \
+        tolerance * problem.pressure_scale
+    reason = "converged_kkt" if converged else (solution.reason if not solution.converged
+                                                else "load_not_reached")
+    return problem.make_solution(
+        solution.gap, solution.pressure, solution.gap <= 0, control, converged=converged,
+        reason=reason, solver="pcg-gap+mean-gap-secant", iterations=iterations,
+        operator_applications=problem.operator_applications - start_ops, wall_time=timer(),
+        history=history)
 
 
 class GapHessian:

@@ -1,0 +1,248 @@
+"""Preconditioned projected conjugate gradients on the gap.
+
+The unknown is the gap ``g >= 0`` itself (the "gap-primal" of Rey, Anciaux &
+Molinari, Comput. Mech. 60 (2017) 69; Bugnicourt, Sainsot, Dureisseix, Gauthier
+& Lubrecht, Tribol. Lett. 66 (2018) 29), so adhesive interactions ``v(g)`` enter
+directly.  The gradient per pixel area is ``grad = p_el + v'(g)`` with
+``p_el = K (g + h)``; at the solution ``grad + P0 = 0`` where the surfaces are
+apart, ``grad + P0 >= 0`` where they touch.
+
+Algorithm
+---------
+Conjugate gradients on the free set ``F`` (points off the wall, and points at
+the wall that are pulled off it), with a projection onto ``g >= 0`` after each
+step and a restart whenever the projection acts:
+
+* mean-gap control: directions have zero mean over ``F``; the multiplier
+  ``P0 = -mean_F(grad)`` is estimated every iteration and the projection onto
+  ``{g >= 0, mean(g) = g_bar}`` (``g = max(y + mu, 0)``) is found by a Newton
+  iteration on ``mu`` that converges in a few reductions;
+* load control: ``P0`` is given; the mean mode is free.
+
+Preconditioning (petgap's addition): the stiffness ``K`` (symbol
+``E* |q| / 2``) restricted to the free set has a condition number growing like
+``L / a0``; its opposite-order partner, the compliance ``K^{-1}`` restricted to
+the same set, ``z = P_F K^{-1} P_F r``, leaves a condition number that grows
+only like ``log^2(L / a0)`` (operator preconditioning, Steinbach & Wendland,
+Adv. Comput. Math. 9 (1998) 191).  ``K^{-1}`` has no ``q = 0`` mode; under load
+control the preconditioner adds ``c mean_F(r)`` on ``F`` with
+``c = h0 / (h0' E*)``, which makes it positive definite on ``F``; one outlier
+eigenvalue costs about one iteration whatever ``c`` is.
+
+Each iteration applies ``K^{-1}`` (preconditioner) and ``K`` (curvature along
+the direction): two transform pairs.  ``p_el`` follows by the recurrence
+``p_el += tau K t`` when the projection does not act; otherwise it is recomputed
+(a third pair).  Step lengths are exact minimisers of the local quadratic
+model; where the adhesive curvature makes the model non-convex along the
+direction, the step is capped at ``rho`` per point and the method restarts, and
+such steps are counted and reported.
+
+Convergence: the largest ``|grad + P0|`` over ``F`` relative to ``h0' E*``
+(:meth:`petgap.contact.ContactProblem.kkt_residuals`), judged on a freshly
+evaluated ``p_el``.
+"""
+import numpy as np
+from mpi4py import MPI
+
+from . import _kernels as _k
+from .contact import Load, MeanGap, Timer
+
+
+def _sums(comm, *values):
+    buf = np.array(values, dtype=float)
+    comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
+    return buf
+
+
+def _project_mean(grid, g, target, h, padded, comm):
+    """``g = max(g + mu, 0)`` with ``mean(g) = target``; also loads ``g + h`` into the buffer.
+
+    Newton on the convex, increasing, piecewise-linear ``mean(max(g + mu, 0))``
+    started to the right of the root converges monotonically in a few steps,
+    one reduction each.
+    """
+    n = grid.npoints
+    mu = target - grid.mean(g)
+    # start to the right of the root: the mean of max(., 0) is at least the mean
+    s, count = _sums(comm, *_k.shifted_positive_sums(g, mu))
+    for _ in range(100):
+        excess = s / n - target
+        if abs(excess) <= 1e-14 * max(abs(target), 1e-300) or count == 0:
+            break
+        mu -= excess * n / count
+        s_new, count = _sums(comm, *_k.shifted_positive_sums(g, mu))
+        if s_new / n - target >= excess and excess > 0:  # no progress: converged to round-off
+            s = s_new
+            break
+        s = s_new
+    _k.project_and_load(g, mu, h, padded)
+
+
+def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_gap=None,
+           monitor=None, refresh_interval=50):
+    """Solve hard-wall or adhesive contact on the gap, under load or mean-gap control.
+
+    Parameters
+    ----------
+    problem : petgap.contact.ContactProblem
+    control : Load or MeanGap
+    tolerance : float
+        Target for the largest KKT stress violation over ``h0' E*``.
+    max_iterations : int
+    initial_gap : ndarray, optional
+        Warm start (copied and made feasible).
+    monitor : callable, optional
+        ``monitor(iteration, residual)`` on every rank.
+    refresh_interval : int
+        Recompute ``p_el`` from scratch at least this often.
+
+    Returns
+    -------
+    petgap.contact.ContactSolution
+        ``history`` holds the residuals; ``reason`` says why it stopped.
+    """
+    grid, comm = problem.grid, problem.grid.comm
+    h = problem.topography
+    half_space = problem.half_space
+    padded = grid._padded
+    timer = Timer()
+    n = grid.npoints
+    interaction = problem.interaction
+    w = interaction.work if interaction.adhesive else 0.0
+    rho = interaction.range if interaction.adhesive else 1.0
+    load = isinstance(control, Load)
+    if load:
+        lam = float(control.mean_pressure)
+    elif isinstance(control, MeanGap):
+        target = float(control.mean_gap)
+        if not target >= 0:
+            raise ValueError(f"mean gap {target} < 0 is impossible with a hard wall (gap >= 0)")
+    else:
+        raise TypeError(f"unknown control {control!r}")
+    if load and not interaction.adhesive and lam < 0:
+        raise ValueError(f"mean pressure {lam} < 0: a non-adhesive interface cannot carry a "
+                         f"tensile load")
+    start_ops = problem.operator_applications
+    mean_mode = problem.gap_scale / problem.pressure_scale  # c of the module docstring
+
+    g = np.empty(grid.local_shape)
+    if initial_gap is not None:
+        g[...] = np.maximum(initial_gap, 0.0)
+    else:
+        g[...] = -h
+    if load:
+        if initial_gap is None:
+            top = comm.allreduce(float(h.max()), op=MPI.MAX)
+            g += top
+        np.maximum(g, 0.0, out=g)
+        np.add(g, h, out=padded[:, :grid.ny])
+    else:
+        _project_mean(grid, g, target, h, padded, comm)
+    pel = np.empty(grid.local_shape)
+    t = np.zeros(grid.local_shape)
+
+    def fresh_pressure():
+        half_space.apply_in_buffer(inverse=False)
+        problem.operator_applications += 1
+        _k.copy_from(pel, padded)
+
+    fresh_pressure()
+    fresh, since_fresh = True, 0
+    beta_ok, rz_old = False, 1.0
+    history = []
+    negative_curvature = 0
+    converged, reason, it = False, "max_iterations", 0
+    lam_f = lam if load else 0.0
+    for it in range(max_iterations + 1):
+        if not load:
+            s_open, n_open = _sums(comm, *_k.gcg_open_sums(pel, g, w, rho))
+            lam_f = -s_open / n_open if n_open > 0 else 0.0
+        s_free, n_free, gmax, gmin = _k.gcg_free_sums(pel, g, lam_f, w, rho)
+        s_free, n_free = _sums(comm, s_free, n_free)
+        ext = np.array([gmax, -gmin])
+        comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
+        if not load:
+            lam = -s_free / n_free if n_free > 0 else lam_f
+        if n_free > 0:
+            residual = max(ext[0] + lam, ext[1] - lam) / problem.pressure_scale
+        else:
+            residual = 0.0
+        if not np.isfinite(residual):
+            reason = "diverged_nan"
+            break
+        if residual <= tolerance and not fresh:
+            np.add(g, h, out=padded[:, :grid.ny])
+            fresh_pressure()
+            fresh, since_fresh = True, 0
+            continue
+        history.append(residual)
+        if monitor is not None:
+            monitor(it, residual)
+        if residual <= tolerance:
+            converged, reason = True, "converged_kkt"
+            break
+        if it >= max_iterations:
+            break
+
+        # preconditioned residual z = P_F K^{-1} P_F r (one pair)
+        _k.gcg_write_residual(pel, g, lam_f, lam, w, rho, padded)
+        half_space.apply_in_buffer(inverse=True)
+        problem.operator_applications += 1
+        sum_z, rz, sum_r = _sums(comm, *_k.gcg_precond_sums(padded, pel, g, lam_f, lam, w, rho))
+        if load:
+            # mean mode: z += c mean(r) on F, i.e. a shift of -c sum_r / n
+            zshift = -mean_mode * sum_r / n
+            rz += mean_mode * sum_r * sum_r / n
+        else:
+            zshift = sum_z / n_free
+        beta = rz / rz_old if beta_ok else 0.0
+        rz_old = rz
+        _k.gcg_direction(padded, pel, g, t, lam_f, zshift, beta, w, rho)
+
+        # curvature along t (one pair): K t lands in the buffer
+        half_space.apply_in_buffer(inverse=False)
+        problem.operator_applications += 1
+        curv, slope, tmax, reach = _k.gcg_curvature(padded, t, pel, g, lam if load else 0.0,
+                                                    w, rho)
+        curv, slope = _sums(comm, curv, slope)
+        tmax = comm.allreduce(tmax, op=MPI.MAX)
+        if not slope < 0:
+            # not a descent direction (round-off or non-convexity): restart
+            beta_ok = False
+            if not fresh:
+                np.add(g, h, out=padded[:, :grid.ny])
+                fresh_pressure()
+                fresh, since_fresh = True, 0
+                continue
+            reason = "no_descent_direction"
+            break
+        if curv > 0:
+            tau = -slope / curv
+        else:
+            negative_curvature += 1
+            tau = rho / tmax if tmax > 0 else 0.0
+        negative = comm.allreduce(_k.gcg_step(g, t, tau), op=MPI.SUM)
+        if negative > 0 or curv <= 0 or since_fresh >= refresh_interval:
+            # the projection acts: new free set, fresh elastic pressure, restart
+            if load:
+                np.maximum(g, 0.0, out=g)
+                np.add(g, h, out=padded[:, :grid.ny])
+            else:
+                _project_mean(grid, g, target, h, padded, comm)
+            fresh_pressure()
+            fresh, since_fresh = True, 0
+            beta_ok = negative == 0 and curv > 0
+        else:
+            _k.axpy(pel, padded, tau)
+            fresh = False
+            since_fresh += 1
+            beta_ok = True
+
+    pressure = pel + lam
+    contact = g <= 0
+    solution = problem.make_solution(
+        g, pressure, contact, control, converged=converged, reason=reason, solver="pcg-gap",
+        iterations=it, operator_applications=problem.operator_applications - start_ops,
+        wall_time=timer(), history=history)
+    solution.negative_curvature_steps = negative_curvature
+    return solution
