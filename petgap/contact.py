@@ -60,7 +60,17 @@ class MeanGap:
 class ContactSolution:
     """A solved (or not) contact state and how it was reached.
 
-    Fields are this rank's slabs; scalars are global.  ``converged`` is False
+    Fields are this rank's slabs; scalars are global.  Contact (``A_rep``) is
+    repulsive contact: zero gap and compressive pressure.  Forces are per cell:
+    ``repulsive_force`` is the hard-wall reaction ``sum dx dy (p + v'(0))`` over
+    the points at the wall, ``attractive_force = -sum dx dy v'(g)`` over all
+    points (the paper's Eq. 15, negative when attractive); their sum is
+    ``A0 mean_pressure``.  ``attractive_fraction`` is the area fraction of the
+    points outside repulsive contact within one interaction range
+    (``g <= rho``) -- the bands of width ``d_att`` of the paper's Fig. 1.
+    ``kappa_rep = A_rep h0' E* / F_rep`` and ``inv_kappa_att = -F_att /
+    (h0' E* A_rep)``, positive for attraction as in the paper's Fig. 3 (the
+    paper's Eq. 16 text writes the ratio without the minus sign).  ``converged`` is False
     whenever the tolerance was not met (for instance at the iteration limit);
     ``reason`` then says why the solver stopped.
     """
@@ -74,6 +84,10 @@ class ContactSolution:
     elastic_energy: float
     interaction_energy: float
     kappa_rep: float
+    repulsive_force: float
+    attractive_force: float
+    attractive_fraction: float
+    inv_kappa_att: float
     kkt_pressure: float
     kkt_gap: float
     converged: bool
@@ -88,7 +102,8 @@ class ContactSolution:
         """The scalar results as a flat dict (for HDF5 attributes and tables)."""
         out = {k: getattr(self, k) for k in (
             "mean_gap", "mean_pressure", "contact_fraction", "elastic_energy",
-            "interaction_energy", "kappa_rep", "kkt_pressure", "kkt_gap", "converged",
+            "interaction_energy", "kappa_rep", "repulsive_force", "attractive_force",
+            "attractive_fraction", "inv_kappa_att", "kkt_pressure", "kkt_gap", "converged",
             "reason", "solver", "iterations", "operator_applications", "wall_time")}
         out["control"] = self.control.kind
         out["control_value"] = self.control.value
@@ -200,20 +215,38 @@ class ContactProblem:
         """Assemble a :class:`ContactSolution` with all derived quantities."""
         grid = self.grid
         kkt_p, kkt_g = self.kkt_residuals(gap, pressure, contact)
+        interaction = self.interaction
         repulsive = contact & (pressure > 0)
-        local = np.array([gap.sum(), pressure.sum(), np.count_nonzero(repulsive),
-                          self.interaction.energy(gap).sum() if self.interaction.adhesive else 0.0])
+        if interaction.adhesive:
+            stress = interaction.derivative(gap)          # v'(g) >= 0, tensile
+            wall = np.where(contact, pressure + stress, 0.0)
+            attractive = (~repulsive) & (gap <= interaction.range)
+            local = np.array([gap.sum(), pressure.sum(), np.count_nonzero(repulsive),
+                              interaction.energy(gap).sum(), wall.sum(), stress.sum(),
+                              np.count_nonzero(attractive)])
+        else:
+            local = np.array([gap.sum(), pressure.sum(), np.count_nonzero(repulsive), 0.0,
+                              pressure[contact].sum(), 0.0, 0.0])
         total = np.empty_like(local)
         grid.comm.Allreduce(local, total)
         n = grid.npoints
+        area = grid.pixel_area
         mean_gap, mean_pressure, c = total[0] / n, total[1] / n, total[2] / n
+        # Force split (GUIDE section 4; paper Eq. 1 and 15): F = A0 P0 = F_rep + F_att
+        # with F_att = -sum dx dy v'(g) (< 0, attractive) and F_rep the wall reaction.
+        repulsive_force, attractive_force = area * total[4], -area * total[5]
+        a_rep = c * grid.area
         displacement = gap + self.topography  # up to a constant: energy ignores it
         elastic = self.half_space.energy(displacement)
-        kappa = c * self.pressure_scale / mean_pressure if mean_pressure > 0 else float("nan")
+        kappa = a_rep * self.pressure_scale / repulsive_force if repulsive_force > 0 else float("nan")
+        inv_kappa_att = (-attractive_force / (self.pressure_scale * a_rep)
+                         if interaction.adhesive and a_rep > 0 else 0.0)
         return ContactSolution(
             gap=gap, pressure=pressure, control=control, mean_gap=mean_gap,
             mean_pressure=mean_pressure, contact_fraction=c, elastic_energy=elastic,
-            interaction_energy=grid.pixel_area * total[3], kappa_rep=kappa,
+            interaction_energy=area * total[3], kappa_rep=kappa,
+            repulsive_force=repulsive_force, attractive_force=attractive_force,
+            attractive_fraction=total[6] / n, inv_kappa_att=inv_kappa_att,
             kkt_pressure=kkt_p, kkt_gap=kkt_g, converged=bool(converged), reason=str(reason),
             solver=solver, iterations=int(iterations),
             operator_applications=int(operator_applications), wall_time=float(wall_time),
