@@ -97,6 +97,9 @@ class ContactSolution:
     operator_applications: int
     wall_time: float
     history: list = field(default_factory=list, repr=False)
+    direction: str = "start"
+    jump: bool = False
+    negative_curvature_steps: int = 0
 
     def scalars(self):
         """The scalar results as a flat dict (for HDF5 attributes and tables)."""
@@ -104,7 +107,8 @@ class ContactSolution:
             "mean_gap", "mean_pressure", "contact_fraction", "elastic_energy",
             "interaction_energy", "kappa_rep", "repulsive_force", "attractive_force",
             "attractive_fraction", "inv_kappa_att", "kkt_pressure", "kkt_gap", "converged",
-            "reason", "solver", "iterations", "operator_applications", "wall_time")}
+            "reason", "solver", "iterations", "operator_applications", "wall_time",
+            "direction", "jump", "negative_curvature_steps")}
         out["control"] = self.control.kind
         out["control_value"] = self.control.value
         return out

@@ -131,12 +131,33 @@ def sweep(problem, controls, **kwargs):
     """Solve a list of controls in order, each warm-started from the previous one.
 
     Yields each :class:`~petgap.contact.ContactSolution` as soon as it is done,
-    so the caller can store it before the next step starts.
+    so the caller can store it before the next step starts.  Each solution gets
+
+    * ``direction``: ``"loading"`` when the control pushes the surfaces together
+      (larger load, smaller mean gap) relative to the previous step,
+      ``"unloading"`` when it pulls them apart, ``"start"`` for the first;
+    * ``jump``: True when the repulsive area changed faster (per unit control)
+      than 3 times the previous step did *and* by more than 1 % of the cell --
+      the signature of an instability (snap-in, pull-off) where the warm start left one branch of an adhesive, multistable problem for another.
+      A sweep that reverses direction therefore exposes hysteresis: the same
+      control value may carry different states on loading and unloading, and
+      which one was found is recorded, never averaged away.
     """
     previous = kwargs.pop("initial", None)
+    last_rate = 0.0
     for control in controls:
-        previous = solve(problem, control, initial=previous, **kwargs)
-        yield previous
+        solution = solve(problem, control, initial=previous, **kwargs)
+        solution.direction, solution.jump = "start", False
+        if previous is not None:
+            change = control.value - previous.control.value
+            pushes = change > 0 if isinstance(control, Load) else change < 0
+            solution.direction = "loading" if pushes else "unloading"
+            dc = solution.contact_fraction - previous.contact_fraction
+            rate = abs(dc / change) if change != 0 else (math.inf if dc else 0.0)
+            solution.jump = bool(abs(dc) > 0.01 and rate > 3 * last_rate)
+            last_rate = rate
+        previous = solution
+        yield solution
 
 
 # --------------------------------------------------------------------- TAO
