@@ -1,0 +1,149 @@
+#!/usr/bin/env python3
+"""petgap's FFT transform pair against the FFTW-MPI floor (GUIDE section 2).
+
+For each grid size N and rank count P this alternates, round by round, two
+measurements of one forward (r2c) plus one backward (c2r) 2D transform of an
+N x N field:
+
+* ``../shared/bench/fft_limit N P`` (C, FFTW-MPI, FFTW_MEASURE, transposed
+  layout; median of 15 pairs), and
+* petgap's own pair: ``Grid((N, N), planner="measure")``, ``grid.forward()`` then
+  ``grid.backward()`` on the grid's own buffers, timed exactly as fft_limit.c
+  does (barrier, MPI_Wtime, pair, barrier), median of ``--repeats`` pairs after
+  ``--warmup`` untimed pairs, run under ``mpirun -n P``.
+
+The order of the two alternates between rounds, so that slow drifts of a noisy
+machine hit both alike.  Printed: a markdown table of the medians over rounds of
+the per-run medians, and their ratio.
+
+Usage (from the repository root, after ``source scripts/bootstrap.sh``)::
+
+    python benchmarks/fft_pair.py [--sizes 1024 2048] [--ranks 1 2] [--rounds 5]
+
+``--worker N`` is the inner measurement (run by the script under mpirun).
+"""
+import argparse
+import os
+import re
+import shlex
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+FFT_LIMIT = ROOT.parent / "shared" / "bench" / "fft_limit"
+
+
+def worker(n, repeats, warmup):
+    """Time petgap's transform pair on an n x n grid; rank 0 prints the median."""
+    import numpy as np
+    from mpi4py import MPI
+
+    from petgap.grid import Grid
+    comm = MPI.COMM_WORLD
+    grid = Grid((n, n), comm=comm, planner="measure")
+    # Data as fft_limit.c's: uniform random numbers (after planning, which
+    # scribbles on the buffers).  Values grow by n^2 per unnormalised pair, as
+    # they do in fft_limit; 17 pairs stay far from overflow for n <= 8192.
+    grid.real[...] = np.random.default_rng(comm.rank).random(grid.local_shape)
+    for _ in range(warmup):
+        grid.forward()
+        grid.backward()
+    times = []
+    for _ in range(repeats):
+        comm.Barrier()
+        t0 = MPI.Wtime()
+        grid.forward()
+        grid.backward()
+        comm.Barrier()
+        times.append(MPI.Wtime() - t0)
+    times.sort()
+    if comm.rank == 0:
+        print(f"petgap N={n} ranks={comm.size} median_pair_s={times[len(times) // 2]:.6f}",
+              flush=True)
+
+
+def _median_from(output, what):
+    m = re.search(r"median_pair_s=([0-9.eE+-]+)", output)
+    if not m:
+        raise RuntimeError(f"no median in the output of {what}:\n{output}")
+    return float(m.group(1))
+
+
+def _run(cmd, what, env=None, attempts=2):
+    """Run a measurement; on failure show its output and try once more."""
+    for attempt in range(attempts):
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=900, env=env)
+        if out.returncode == 0:
+            return _median_from(out.stdout, what)
+        print(f"# {what} failed (exit {out.returncode}, attempt {attempt + 1}):\n"
+              f"{out.stdout}{out.stderr}", file=sys.stderr, flush=True)
+    raise RuntimeError(f"{what} failed {attempts} times: {shlex.join(cmd)}")
+
+
+def run_fft_limit(n, ranks, repeats):
+    return _run([str(FFT_LIMIT), str(n), str(ranks), str(repeats)], "fft_limit")
+
+
+def run_petgap(n, ranks, repeats, warmup, wisdom="cached"):
+    """petgap's pair under mpirun; ``wisdom="fresh"`` plans from scratch, as fft_limit does."""
+    cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", sys.executable, str(Path(__file__)),
+           "--worker", str(n), "--repeats", str(repeats), "--warmup", str(warmup)]
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    if wisdom == "fresh":
+        with tempfile.TemporaryDirectory(prefix="petgap-wisdom-") as empty:
+            env["PETGAP_WISDOM_DIR"] = empty
+            return _run(cmd, "the petgap worker", env=env)
+    return _run(cmd, "the petgap worker", env=env)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1024, 2048])
+    parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--rounds", type=int, default=5, help="alternating runs of each")
+    parser.add_argument("--repeats", type=int, default=15, help="timed pairs per run")
+    parser.add_argument("--warmup", type=int, default=2, help="untimed pairs per petgap run")
+    parser.add_argument("--wisdom", choices=["cached", "fresh"], default="cached",
+                        help="petgap's FFTW wisdom: the on-disk cache (as petgap runs), or "
+                             "none, planning afresh each run (as fft_limit does)")
+    parser.add_argument("--worker", type=int, metavar="N", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.worker:
+        worker(args.worker, args.repeats, args.warmup)
+        return
+
+    rows = []
+    print(f"# {time.strftime('%Y-%m-%d %H:%M')}, {os.cpu_count()} cores, load average "
+          f"{os.getloadavg()[0]:.2f}; {args.rounds} alternating rounds, {args.repeats} pairs per "
+          f"run, petgap wisdom {args.wisdom}", file=sys.stderr)
+    for n in args.sizes:
+        for ranks in args.ranks:
+            limit, ours = [], []
+            for k in range(args.rounds):
+                order = (0, 1) if k % 2 == 0 else (1, 0)
+                for which in order:
+                    if which == 0:
+                        limit.append(run_fft_limit(n, ranks, args.repeats))
+                    else:
+                        ours.append(run_petgap(n, ranks, args.repeats, args.warmup,
+                                               args.wisdom))
+                print(f"# N={n} ranks={ranks} round {k}: fft_limit {limit[-1]:.4f} s, "
+                      f"petgap {ours[-1]:.4f} s", file=sys.stderr, flush=True)
+            a, b = statistics.median(limit), statistics.median(ours)
+            rows.append((n, ranks, a, b, b / a, min(limit), min(ours)))
+    print(f"# done {time.strftime('%H:%M')}, load average {os.getloadavg()[0]:.2f}",
+          file=sys.stderr)
+
+    print("| N | ranks | fft_limit median s | petgap median s | ratio | "
+          "fft_limit best s | petgap best s |")
+    print("|---|---|---|---|---|---|---|")
+    for n, ranks, a, b, r, amin, bmin in rows:
+        print(f"| {n} | {ranks} | {a:.4f} | {b:.4f} | {r:.2f} | {amin:.4f} | {bmin:.4f} |")
+
+
+if __name__ == "__main__":
+    main()

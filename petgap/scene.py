@@ -1,0 +1,858 @@
+"""Scenes: one TOML file describes one run.
+
+A scene is a TOML file (read with the standard library's :mod:`tomllib`) with one
+table per stage of a run: ``[grid]``, ``[surface]``, ``[material]``,
+``[interaction]``, ``[control]``, ``[solver]`` and ``[output]``.  Its schema is
+declared once, in this module, as frozen dataclasses whose fields carry a
+:class:`Key` (type, default, allowed values, documentation); validation, the
+defaults, the error messages and :func:`describe_schema` are all derived from
+that declaration.  To add a section, write another ``@dataclass(frozen=True)``
+whose fields are :func:`key` s and add it as a field of :class:`Scene`.
+
+Units
+-----
+petgap has no built-in unit system: every length (``a0``, wavelengths, the
+interaction range, mean gaps) is in the same length unit, and every pressure
+(``contact_modulus``, loads) in the same pressure unit; the work of adhesion is
+pressure x length.  Where a length is asked for, a string ``"<number> a0"`` is
+accepted too and means that many pixels (``"32 a0"`` = 32 x ``grid.a0``).
+
+Validation
+----------
+Unknown sections and keys are errors (with the nearest known name suggested);
+so are keys that do not apply to the chosen ``kind``.  Every error is a
+:class:`SceneError` whose message names the dotted key (``surface.hurst``), the
+offending value and what is allowed; all errors of a file are reported at
+once.  A scene is parsed on rank 0 only and the result, or the error, is
+broadcast, so that every rank of the communicator returns the same scene or
+raises the same :class:`SceneError` and none is left waiting in a collective.
+"""
+import dataclasses
+import difflib
+import json
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+__all__ = ["SceneError", "Scene", "GridSection", "SurfaceSection", "MaterialSection",
+           "InteractionSection", "ControlSection", "SolverSection", "OutputSection",
+           "describe_schema"]
+
+
+class SceneError(ValueError):
+    """An invalid scene.  ``errors`` holds one line per problem found."""
+
+    def __init__(self, message, errors=()):
+        super().__init__(message)
+        self.errors = tuple(errors) if errors else (message,)
+
+
+class _Required:
+    def __repr__(self):
+        return "REQUIRED"
+
+
+#: Default of a key that must be given (when it applies).
+REQUIRED = _Required()
+
+
+@dataclass(frozen=True)
+class Derived:
+    """A default computed from the other values of the section and earlier sections.
+
+    ``func(values, ctx)`` gets the section's values so far and the sections
+    already built (by name); ``text`` documents the rule in the schema table.
+    """
+    func: object
+    text: str
+
+
+class _Invalid(Exception):
+    """A value failed validation: ``problem`` says why, ``allowed`` what would do."""
+
+    def __init__(self, problem, allowed):
+        super().__init__(problem)
+        self.problem, self.allowed = problem, allowed
+
+
+class _Skip(Exception):
+    """A value cannot be checked because something it depends on was invalid."""
+
+
+# ----------------------------------------------------------------- value types
+def _is_number(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _range_phrase(lo, hi, lo_open=False, hi_open=False):
+    """``"> 0"``, ``">= 1"``, ``"in (0, 1)"``, ``"in (0, 0.1]"`` or ``""``."""
+    if lo is not None and hi is not None:
+        return f"in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+    if lo is not None:
+        return f"{'>' if lo_open else '>='} {lo:g}"
+    if hi is not None:
+        return f"{'<' if hi_open else '<='} {hi:g}"
+    return ""
+
+
+class _Type:
+    """Base of the value types: ``convert`` checks and normalises a TOML value."""
+    name = "value"
+
+    def convert(self, value, ctx):
+        raise NotImplementedError
+
+    def allowed(self):
+        return self.name
+
+    def default_text(self, default):
+        return _toml_repr(default)
+
+
+class Int(_Type):
+    """An integer (TOML integer; booleans and floats are refused)."""
+    name = "integer"
+
+    def __init__(self, minimum=None, maximum=None):
+        self.minimum, self.maximum = minimum, maximum
+
+    def allowed(self):
+        return f"an integer {_range_phrase(self.minimum, self.maximum)}".strip()
+
+    def convert(self, value, ctx):
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise _Invalid("not an integer", self.allowed())
+        if (self.minimum is not None and value < self.minimum) or \
+                (self.maximum is not None and value > self.maximum):
+            raise _Invalid("out of range", self.allowed())
+        return value
+
+
+class Float(_Type):
+    """A finite real number (TOML integer or float) within optional bounds."""
+    name = "number"
+
+    def __init__(self, minimum=None, maximum=None, min_open=False, max_open=False):
+        self.minimum, self.maximum = minimum, maximum
+        self.min_open, self.max_open = min_open, max_open
+
+    def _range(self):
+        return _range_phrase(self.minimum, self.maximum, self.min_open, self.max_open)
+
+    def allowed(self):
+        return f"a number {self._range()}" if self._range() else "a finite number"
+
+    def _check_range(self, x):
+        lo, hi = self.minimum, self.maximum
+        if (lo is not None and (x < lo or (self.min_open and x == lo))) or \
+                (hi is not None and (x > hi or (self.max_open and x == hi))):
+            raise _Invalid("out of range", self.allowed())
+
+    def convert(self, value, ctx):
+        if not _is_number(value):
+            raise _Invalid("not a number", self.allowed())
+        x = float(value)
+        if not math.isfinite(x):
+            raise _Invalid("not finite", self.allowed())
+        self._check_range(x)
+        return x
+
+
+_PIXELS = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*a0\s*$")
+
+
+class Length(Float):
+    """A length: a number in physical units, or ``"<number> a0"`` meaning pixels."""
+    name = "length"
+
+    def allowed(self):
+        b = f" {self._range()}" if self._range() else ""
+        return f'a length{b} (a number in physical units, or a string like "32 a0" in pixels)'
+
+    def convert(self, value, ctx):
+        if isinstance(value, str):
+            m = _PIXELS.match(value)
+            if not m:
+                raise _Invalid('not a length', self.allowed())
+            grid = ctx.get("grid")
+            if grid is None:
+                raise _Skip  # the pixel size itself was invalid and is reported already
+            x = float(m.group(1)) * grid.a0
+            if not math.isfinite(x):
+                raise _Invalid("not finite", self.allowed())
+            self._check_range(x)
+            return x
+        if not _is_number(value):
+            raise _Invalid("not a length", self.allowed())
+        return super().convert(value, ctx)
+
+
+class Choice(_Type):
+    """One of a fixed set of strings."""
+    name = "string"
+
+    def __init__(self, *choices):
+        self.choices = tuple(choices)
+
+    def allowed(self):
+        return "one of " + ", ".join(json.dumps(c) for c in self.choices)
+
+    def convert(self, value, ctx):
+        if not isinstance(value, str):
+            raise _Invalid("not a string", self.allowed())
+        if value not in self.choices:
+            close = difflib.get_close_matches(value, self.choices, n=1, cutoff=0.5)
+            hint = f" (did you mean {json.dumps(close[0])}?)" if close else ""
+            raise _Invalid(f"not a valid choice{hint}", self.allowed())
+        return value
+
+
+class Bool(_Type):
+    name = "boolean"
+
+    def allowed(self):
+        return "true or false"
+
+    def convert(self, value, ctx):
+        if not isinstance(value, bool):
+            raise _Invalid("not a boolean", self.allowed())
+        return value
+
+
+class Str(_Type):
+    name = "string"
+
+    def allowed(self):
+        return "a non-empty string"
+
+    def convert(self, value, ctx):
+        if not isinstance(value, str) or not value:
+            raise _Invalid("not a non-empty string", self.allowed())
+        return value
+
+
+class FilePath(Str):
+    """An existing file; relative paths are relative to the scene file's directory."""
+    name = "path"
+
+    def allowed(self):
+        return "the path of an existing file (relative paths start at the scene file's directory)"
+
+    def convert(self, value, ctx):
+        super().convert(value, ctx)
+        path = Path(value).expanduser()
+        if not path.is_absolute():
+            path = Path(ctx["_base_dir"]) / path
+        path = path.resolve()
+        if not path.is_file():
+            raise _Invalid(f"no such file ({path})", self.allowed())
+        return str(path)
+
+
+class Numbers(_Type):
+    """A number or a non-empty list of numbers, each checked by ``element``; gives a tuple."""
+    name = "number or list"
+
+    def __init__(self, element):
+        self.element = element
+
+    def allowed(self):
+        return f"{self.element.allowed()}, or a non-empty list of such values"
+
+    def convert(self, value, ctx):
+        items = value if isinstance(value, list) else [value]
+        if not items:
+            raise _Invalid("an empty list", self.allowed())
+        out = []
+        for i, item in enumerate(items):
+            try:
+                out.append(self.element.convert(item, ctx))
+            except _Invalid as exc:
+                where = f"item {i} ({_toml_repr(item)}) is " if isinstance(value, list) else ""
+                raise _Invalid(where + exc.problem, self.allowed()) from None
+        return tuple(out)
+
+
+class StrList(_Type):
+    """A list of distinct strings from a fixed set; gives a tuple."""
+    name = "list of strings"
+
+    def __init__(self, *choices):
+        self.choices = tuple(choices)
+
+    def allowed(self):
+        return "a list of distinct values from " + ", ".join(json.dumps(c) for c in self.choices)
+
+    def convert(self, value, ctx):
+        if not isinstance(value, list):
+            raise _Invalid("not a list", self.allowed())
+        for item in value:
+            if not isinstance(item, str) or item not in self.choices:
+                raise _Invalid(f"{_toml_repr(item)} is not a valid choice", self.allowed())
+        if len(set(value)) != len(value):
+            raise _Invalid("has repeated entries", self.allowed())
+        return tuple(value)
+
+    def default_text(self, default):
+        return _toml_repr(list(default))
+
+
+class OptionTable(_Type):
+    """A table of PETSc options: names (leading ``-`` optional) to scalar values.
+
+    Gives a tuple of ``(name, value)`` string pairs, names without the dash,
+    booleans as ``"true"``/``"false"`` and an empty string for a bare flag.
+    """
+    name = "table"
+
+    def allowed(self):
+        return ('a table of PETSc option names to strings, numbers or booleans, '
+                'e.g. {tao_monitor = "", tao_max_funcs = 1000}')
+
+    def convert(self, value, ctx):
+        if not isinstance(value, dict):
+            raise _Invalid("not a table", self.allowed())
+        out = []
+        for name, v in value.items():
+            bare = name.lstrip("-")
+            if not bare or not re.fullmatch(r"[A-Za-z0-9_]+", bare):
+                raise _Invalid(f"{json.dumps(name)} is not a PETSc option name", self.allowed())
+            if isinstance(v, bool):
+                v = "true" if v else "false"
+            elif _is_number(v):
+                if not math.isfinite(v):
+                    raise _Invalid(f"option {bare} is not finite", self.allowed())
+                v = repr(v)
+            elif not isinstance(v, str):
+                raise _Invalid(f"option {bare} has a {type(v).__name__} value", self.allowed())
+            out.append((bare, v))
+        return tuple(out)
+
+    def default_text(self, default):
+        return "{}" if not default else _toml_repr(dict(default))
+
+
+# ------------------------------------------------------------------- the keys
+@dataclass(frozen=True)
+class Key:
+    """One key of a section: its type, default, documentation and applicability.
+
+    ``when = (other, values)`` makes the key apply only when the section's key
+    ``other`` (declared earlier) has one of ``values``; otherwise giving the
+    key is an error and its value is ``None``.
+    """
+    type: _Type
+    default: object = REQUIRED
+    doc: str = ""
+    when: tuple = None
+
+    def default_text(self):
+        if self.default is REQUIRED:
+            return "required"
+        if isinstance(self.default, Derived):
+            return self.default.text
+        if self.default is None:
+            return "(none)"
+        return self.type.default_text(self.default)
+
+
+def key(type, default=REQUIRED, doc="", when=None):
+    """Declare a section field: a dataclass field carrying its :class:`Key`."""
+    if when is not None:
+        when = (when[0], tuple(when[1]))
+    return field(default=None, metadata={"key": Key(type, default, doc, when)})
+
+
+def _keys(section_cls):
+    return {f.name: f.metadata["key"] for f in fields(section_cls)}
+
+
+# --------------------------------------------------------------- the sections
+@dataclass(frozen=True)
+class GridSection:
+    """The periodic grid: ``nx x ny`` pixels of size ``a0``; the system is ``nx a0 x ny a0``."""
+    nx: int = key(Int(minimum=1), REQUIRED, "number of pixels along x (the distributed axis)")
+    ny: int = key(Int(minimum=1), Derived(lambda v, ctx: v["nx"], "nx"),
+                  "number of pixels along y")
+    a0: float = key(Float(minimum=0, min_open=True), 1.0,
+                    "pixel size, in the length unit of the run")
+
+    @property
+    def shape(self):
+        """``(nx, ny)``."""
+        return (self.nx, self.ny)
+
+    @property
+    def size(self):
+        """Physical size ``(Lx, Ly) = (nx a0, ny a0)``."""
+        return (self.nx * self.a0, self.ny * self.a0)
+
+
+def _half_smaller_side(values, ctx):
+    grid = ctx.get("grid")
+    if grid is None:
+        raise _Skip
+    return min(grid.size) / 2
+
+
+@dataclass(frozen=True)
+class SurfaceSection:
+    """The rigid rough surface: a self-affine random surface, or a topography file."""
+    kind: str = key(Choice("self-affine", "file"), "self-affine",
+                    "how the topography is made")
+    hurst: float = key(Float(0, 1, min_open=True, max_open=True), REQUIRED,
+                       "Hurst exponent H; the PSD falls as q^-2(1+H) between the cutoffs",
+                       when=("kind", ["self-affine"]))
+    lambda_min: float = key(Length(minimum=0, min_open=True), REQUIRED,
+                            "short-wavelength cutoff (q2 = 2 pi / lambda_min); at least 2 a0, "
+                            "and the paper uses >= 32 a0 to resolve contact edges",
+                            when=("kind", ["self-affine"]))
+    lambda_max: float = key(Length(minimum=0, min_open=True),
+                            Derived(_half_smaller_side, "min(Lx, Ly) / 2"),
+                            "long-wavelength cutoff (q1 = 2 pi / lambda_max): the PSD is flat "
+                            "below q1; lambda_min < lambda_max <= max(Lx, Ly)",
+                            when=("kind", ["self-affine"]))
+    rms_slope: float = key(Float(minimum=0, min_open=True),
+                           Derived(lambda v, ctx: 0.1 if v.get("rms_height") is None else None,
+                                   "0.1 unless rms_height is given"),
+                           "rms slope h0' = sqrt(<|grad h|^2>) the surface is scaled to; "
+                           "give rms_slope or rms_height, not both",
+                           when=("kind", ["self-affine"]))
+    rms_height: float = key(Length(minimum=0, min_open=True), None,
+                            "rms height h0 the surface is scaled to, instead of rms_slope",
+                            when=("kind", ["self-affine"]))
+    seed: int = key(Int(minimum=0), 1,
+                    "seed of the random phases and amplitudes; the surface does not depend "
+                    "on the number of ranks", when=("kind", ["self-affine"]))
+    path: str = key(FilePath(), REQUIRED,
+                    "topography file: .npy, or HDF5 (.h5, .hdf5; a petgap result file will do), "
+                    "holding an (nx, ny) array of heights in length units; relative to the scene "
+                    "file's directory", when=("kind", ["file"]))
+    dataset: str = key(Str(), None, "HDF5 dataset to read (default: \"topography\" if present, "
+                       "otherwise the only 2D dataset)", when=("kind", ["file"]))
+
+    @staticmethod
+    def _check(values, ctx, problems):
+        if values["kind"] != "self-affine":
+            return
+        grid = ctx.get("grid")
+        lmin, lmax = values.get("lambda_min"), values.get("lambda_max")
+        if grid is not None and isinstance(lmin, float) and lmin < 2 * grid.a0:
+            problems.append(("lambda_min", lmin, "is below the Nyquist wavelength",
+                             f"lambda_min >= 2 a0 = {2 * grid.a0:g}"))
+        if isinstance(lmin, float) and isinstance(lmax, float) and not lmin < lmax:
+            problems.append(("lambda_max", lmax, f"is not larger than lambda_min = {lmin:g}",
+                             "lambda_min < lambda_max"))
+        if grid is not None and isinstance(lmax, float) and lmax > max(grid.size):
+            problems.append(("lambda_max", lmax, "is larger than the system",
+                             f"lambda_max <= max(Lx, Ly) = {max(grid.size):g}"))
+        if values.get("_given_rms_slope") and values.get("rms_height") is not None:
+            problems.append(("rms_slope", values["rms_slope"],
+                             f"is given together with rms_height = {values['rms_height']:g}",
+                             "exactly one of rms_slope and rms_height (rms_slope = 0.1 if "
+                             "neither is given)"))
+
+
+@dataclass(frozen=True)
+class MaterialSection:
+    """The elastic half-space."""
+    contact_modulus: float = key(Float(minimum=0, min_open=True), 1.0,
+                                 "contact modulus E* = 1 / ((1 - nu1^2)/E1 + (1 - nu2^2)/E2), "
+                                 "in the pressure unit of the run")
+
+
+@dataclass(frozen=True)
+class InteractionSection:
+    """The surface interaction: hard-wall repulsion, plus exponential attraction if asked."""
+    kind: str = key(Choice("hard-wall", "exponential"), "hard-wall",
+                    "hard-wall: g >= 0 only; exponential: also v(g) = -w exp(-g / rho)")
+    work_of_adhesion: float = key(Float(minimum=0, min_open=True), REQUIRED,
+                                  "w, energy per area (pressure x length)",
+                                  when=("kind", ["exponential"]))
+    range: float = key(Length(minimum=0, min_open=True), REQUIRED,
+                       "rho, the decay length of the attraction",
+                       when=("kind", ["exponential"]))
+    resolution_check: str = key(Choice("warn", "error", "off"), "warn",
+                                "what to do when rho is not resolved by the grid",
+                                when=("kind", ["exponential"]))
+
+
+class _ControlValues(Numbers):
+    """Loads (pressures, any sign) or mean gaps (lengths), depending on control.kind."""
+
+    def __init__(self):
+        super().__init__(Float())
+
+    def allowed(self):
+        return ("for kind = \"load\": a mean pressure or a list of them; for kind = \"mean-gap\": "
+                "a length > 0 (number or \"<n> a0\") or a list of them")
+
+    def convert(self, value, ctx):
+        element = Length(minimum=0, min_open=True) if ctx["_section"].get("kind") == "mean-gap" \
+            else Float()
+        try:
+            return Numbers(element).convert(value, ctx)
+        except _Invalid as exc:
+            raise _Invalid(exc.problem, self.allowed()) from None
+
+    def default_text(self, default):
+        return "required"
+
+
+@dataclass(frozen=True)
+class ControlSection:
+    """What is imposed: the mean pressure (load), the mean gap, or nothing (surface only).
+
+    ``values`` sweeps: one solution per value, each step starting from the
+    previous one.  Loads are mean pressures in the run's pressure unit (the
+    same unit as ``material.contact_modulus``; with E* = 1 they are in units of
+    E*), positive in compression.
+    """
+    kind: str = key(Choice("load", "mean-gap", "none"), "none",
+                    "load: impose the mean pressure; mean-gap: impose the mean gap; "
+                    "none: only make and analyse the surface")
+    values: tuple = key(_ControlValues(), REQUIRED,
+                        "mean pressures (load; > 0 for a hard wall, any sign with adhesion) or "
+                        "mean gaps (mean-gap; lengths > 0) to sweep",
+                        when=("kind", ["load", "mean-gap"]))
+    reference: str = key(Choice("non-adhesive"), None,
+                         "non-adhesive: the paper's protocol; values are loads of a non-adhesive "
+                         "reference run, and each adhesive step is solved at the mean gap that "
+                         "reference found (needs interaction.kind = \"exponential\")",
+                         when=("kind", ["load"]))
+
+    @staticmethod
+    def _check(values, ctx, problems):
+        interaction = ctx.get("interaction")
+        vals = values.get("values")
+        if values["kind"] == "load" and isinstance(vals, tuple) and interaction is not None \
+                and interaction.kind == "hard-wall" and min(vals) <= 0:
+            problems.append(("values", list(vals), "has a load <= 0 with a hard-wall interaction",
+                             "loads > 0 (a non-adhesive contact cannot carry tension)"))
+        if values.get("reference") is not None and interaction is not None \
+                and interaction.kind != "exponential":
+            problems.append(("reference", values["reference"],
+                             f"needs an adhesive interaction, and interaction.kind = "
+                             f"{json.dumps(interaction.kind)}",
+                             'reference only with interaction.kind = "exponential"'))
+
+
+@dataclass(frozen=True)
+class SolverSection:
+    """The minimiser and its stopping rule.
+
+    ``petsc_options`` is a tuple of ``(name, value)`` pairs, names without the
+    leading dash; options given after ``--`` on the command line come later and
+    take precedence.
+    """
+    tao_type: str = key(Choice("pcg", "bncg", "blmvm", "bqnls", "gpcg"), "pcg",
+                        "pcg: petgap's projected conjugate gradients; the others are TAO "
+                        "bound-constrained solvers")
+    tolerance: float = key(Float(0, 0.1, min_open=True), 1e-8,
+                           "relative convergence tolerance (KKT violation in pressure / (h0' E*), "
+                           "mean-constraint residual / h0)")
+    max_iterations: int = key(Int(minimum=1), 10000, "iteration limit per sweep step")
+    petsc_options: tuple = key(OptionTable(), (), "extra PETSc options database entries")
+    planner: str = key(Choice("estimate", "measure", "patient"), "measure",
+                       "FFTW planner effort (plans are cached as wisdom on disk)")
+
+    def petsc_args(self):
+        """The options as a command-line style list ``["-name", "value", ...]``."""
+        args = []
+        for name, value in self.petsc_options:
+            args.append(f"-{name}")
+            if value != "":
+                args.append(value)
+        return args
+
+
+@dataclass(frozen=True)
+class OutputSection:
+    """What goes into the HDF5 result file."""
+    fields: tuple = key(StrList("topography", "gap", "pressure", "displacement"),
+                        ("topography", "gap", "pressure"),
+                        "fields written as global datasets")
+    statistics: bool = key(Bool(), True, "write surface and contact statistics as attributes")
+
+
+def _section(cls, doc=None):
+    return field(default=None, metadata={"section": cls, "doc": doc or cls.__doc__})
+
+
+# ------------------------------------------------------------------ the scene
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene: one frozen section per TOML table, plus its provenance.
+
+    Attributes
+    ----------
+    grid, surface, material, interaction, control, solver, output
+        The sections (see :func:`describe_schema`).  Keys that do not apply to
+        the chosen ``kind`` are ``None``; lengths are in physical units.
+    text : str
+        The TOML text exactly as read (for provenance).
+    path : str or None
+        The scene file, if read from one.
+    base_dir : str
+        Directory that relative paths in the scene start from.
+    """
+    grid: GridSection = _section(GridSection)
+    surface: SurfaceSection = _section(SurfaceSection)
+    material: MaterialSection = _section(MaterialSection)
+    interaction: InteractionSection = _section(InteractionSection)
+    control: ControlSection = _section(ControlSection)
+    solver: SolverSection = _section(SolverSection)
+    output: OutputSection = _section(OutputSection)
+    text: str = ""
+    path: str = None
+    base_dir: str = "."
+
+    @classmethod
+    def from_file(cls, path, comm=None):
+        """Read and validate a scene file on rank 0 of ``comm`` (default COMM_WORLD).
+
+        Every rank returns the same :class:`Scene` or raises the same
+        :class:`SceneError` (also for a missing or unreadable file and for
+        malformed TOML, whose message gives the line and column).
+        """
+        path = Path(path)
+
+        def parse():
+            try:
+                text = path.read_text(encoding="utf-8")
+            except FileNotFoundError:
+                raise SceneError(f"scene file {path} not found") from None
+            except (OSError, UnicodeDecodeError) as exc:
+                raise SceneError(f"cannot read scene file {path}: {exc}") from None
+            return _parse(text, path.resolve().parent, str(path), str(path))
+
+        return cls._from_root(parse, comm)
+
+    @classmethod
+    def from_text(cls, text, comm=None, base_dir=None, source="<scene>"):
+        """Validate scene text (rank 0's copy) and return it on every rank of ``comm``.
+
+        ``base_dir`` (default: the current directory) is where relative paths start.
+        """
+        base = Path(base_dir if base_dir is not None else ".").resolve()
+        return cls._from_root(lambda: _parse(text, base, source, None), comm)
+
+    @classmethod
+    def _from_root(cls, parse, comm):
+        if comm is None:
+            from mpi4py import MPI
+            comm = MPI.COMM_WORLD
+        result, failure = None, None
+        if comm.rank == 0:
+            try:
+                result = ("ok", parse())
+            except SceneError as exc:
+                result = ("error", (str(exc), exc.errors))
+            except Exception as exc:  # a bug: still raised on every rank, not a hang
+                failure, result = exc, ("raise", exc)
+        status, payload = comm.bcast(result, root=0)
+        if status == "error":
+            raise SceneError(payload[0], payload[1])
+        if status == "raise":
+            raise failure if failure is not None else payload
+        return _build(payload)
+
+    def to_dict(self):
+        """The resolved scene as nested plain data (JSON-serialisable), without the text."""
+        out = {}
+        for f in fields(self):
+            if "section" in f.metadata:
+                section = getattr(self, f.name)
+                out[f.name] = {k: (dict(v) if k == "petsc_options" else
+                                   list(v) if isinstance(v, tuple) else v)
+                               for k, v in dataclasses.asdict(section).items()}
+        return out
+
+    def to_json(self):
+        """:meth:`to_dict` as compact JSON text."""
+        return json.dumps(self.to_dict(), sort_keys=False, separators=(",", ":"))
+
+
+def _sections():
+    return [(f.name, f.metadata["section"], f.metadata["doc"]) for f in fields(Scene)
+            if "section" in f.metadata]
+
+
+# ---------------------------------------------------------------- the parser
+def _toml_repr(value):
+    """A value written the way it would appear in TOML (truncated if long)."""
+    if isinstance(value, bool):
+        text = "true" if value else "false"
+    elif isinstance(value, str):
+        text = json.dumps(value)
+    elif isinstance(value, float):
+        text = repr(value)
+    elif isinstance(value, (list, tuple)):
+        text = "[" + ", ".join(_toml_repr(v) for v in value) + "]"
+    elif isinstance(value, dict):
+        text = "{" + ", ".join(f"{k} = {_toml_repr(v)}" for k, v in value.items()) + "}"
+    else:
+        text = str(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _parse(text, base_dir, source, path):
+    """Validate scene text; return the plain payload :func:`_build` turns into a Scene."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{source}: not valid TOML: {exc}") from None
+
+    errors = []
+    sections = _sections()
+    names = [name for name, _, _ in sections]
+    all_keys = {name: _keys(cls) for name, cls, _ in sections}
+
+    for top, value in data.items():
+        if top in all_keys:
+            if not isinstance(value, dict):
+                errors.append(f"{top} = {_toml_repr(value)}: is not a table; "
+                              f"allowed: a [{top}] section")
+            continue
+        if isinstance(value, dict):
+            errors.append(f"[{top}]: unknown section{_suggest_section(top, names)}; "
+                          f"allowed: the sections {', '.join(names)}")
+        else:
+            owners = [s for s in names if top in all_keys[s]]
+            hint = f" (did you mean {owners[0]}.{top}, in section [{owners[0]}]?)" if owners \
+                else _suggest_section(top, names)
+            errors.append(f"{top} = {_toml_repr(value)}: unknown top-level key{hint}; "
+                          f"allowed: keys inside the sections {', '.join(names)}")
+
+    ctx = {"_base_dir": str(base_dir)}
+    payload = {}
+    for name, cls, _ in sections:
+        table = data.get(name, {})
+        if not isinstance(table, dict):
+            ctx[name] = None
+            continue
+        values = _parse_section(name, cls, table, ctx, all_keys, errors)
+        payload[name] = values
+        ctx[name] = None if values is None else cls(**values)
+
+    if errors:
+        if len(errors) == 1:
+            raise SceneError(f"{source}: {errors[0]}", errors)
+        lines = "\n".join(f"  - {e}" for e in errors)
+        raise SceneError(f"{source}: {len(errors)} errors:\n{lines}", errors)
+    return {"sections": payload, "text": text, "path": path, "base_dir": str(base_dir)}
+
+
+def _suggest_section(name, names):
+    close = difflib.get_close_matches(name, names, n=1, cutoff=0.6)
+    return f" (did you mean [{close[0]}]?)" if close else ""
+
+
+def _parse_section(name, cls, table, ctx, all_keys, errors):
+    """Check one table against its section class; return its values or None if invalid."""
+    keys = all_keys[name]
+    n_errors = len(errors)
+    for k, v in table.items():
+        if k not in keys:
+            errors.append(_unknown_key(name, k, v, all_keys))
+
+    values, invalid, derived = {}, set(), []
+    ctx["_section"] = values
+    for k, spec in keys.items():
+        dotted = f"{name}.{k}"
+        applies = True
+        if spec.when is not None:
+            other, allowed_values = spec.when
+            if other in invalid:
+                invalid.add(k)
+                continue
+            applies = values.get(other) in allowed_values
+        if k in table:
+            raw = table[k]
+            if not applies:
+                other, allowed_values = spec.when
+                which = " or ".join(f"{name}.{other} = {json.dumps(a)}" for a in allowed_values)
+                errors.append(f"{dotted} = {_toml_repr(raw)}: does not apply with "
+                              f"{name}.{other} = {_toml_repr(values.get(other))}; "
+                              f"allowed: only with {which}")
+                invalid.add(k)
+                continue
+            try:
+                values[k] = spec.type.convert(raw, ctx)
+                values[f"_given_{k}"] = True
+            except _Invalid as exc:
+                errors.append(f"{dotted} = {_toml_repr(raw)}: {exc.problem}; "
+                              f"allowed: {exc.allowed}")
+                invalid.add(k)
+            except _Skip:
+                invalid.add(k)
+        elif not applies:
+            values[k] = None
+        elif spec.default is REQUIRED:
+            condition = ""
+            if spec.when is not None:
+                condition = f" when {name}.{spec.when[0]} = {_toml_repr(values[spec.when[0]])}"
+            errors.append(f"{dotted} is missing: it is required{condition}; "
+                          f"allowed: {spec.type.allowed()}")
+            invalid.add(k)
+        elif isinstance(spec.default, Derived):
+            derived.append(k)
+        else:
+            values[k] = spec.default
+    for k in derived:
+        try:
+            values[k] = keys[k].default.func(values, ctx)
+        except (_Skip, KeyError):
+            invalid.add(k)
+
+    if not invalid and len(errors) == n_errors and hasattr(cls, "_check"):
+        problems = []
+        cls._check(values, ctx, problems)
+        for k, value, problem, allowed in problems:
+            errors.append(f"{name}.{k} = {_toml_repr(value)}: {problem}; allowed: {allowed}")
+    ctx.pop("_section", None)
+    if invalid or len(errors) != n_errors:
+        return None
+    return {k: v for k, v in values.items() if not k.startswith("_")}
+
+
+def _unknown_key(section, k, value, all_keys):
+    known = list(all_keys[section])
+    close = difflib.get_close_matches(k, known, n=1, cutoff=0.6)
+    if close:
+        hint = f" (did you mean {section}.{close[0]}?)"
+    else:
+        owners = [s for s, keys in all_keys.items() if k in keys and s != section]
+        hint = f" (did you mean {owners[0]}.{k}, in section [{owners[0]}]?)" if owners else ""
+    return (f"{section}.{k} = {_toml_repr(value)}: unknown key{hint}; "
+            f"allowed: the keys of [{section}]: {', '.join(known)}")
+
+
+def _build(payload):
+    sections = {name: cls(**payload["sections"][name]) for name, cls, _ in _sections()}
+    return Scene(**sections, text=payload["text"], path=payload["path"],
+                 base_dir=payload["base_dir"])
+
+
+# ------------------------------------------------------------------ the docs
+def describe_schema():
+    """A markdown description of every section and key: type, default, allowed values, doc."""
+    out = ["| key | type | default | allowed | description |",
+           "|---|---|---|---|---|"]
+    for name, cls, doc in _sections():
+        first = " ".join((doc or "").strip().split("\n\n")[0].split())
+        out.append(f"| **[{name}]** | | | | {_md(first)} |")
+        for k, spec in _keys(cls).items():
+            description = spec.doc
+            if spec.when is not None:
+                which = " or ".join(f'`{spec.when[0]} = "{a}"`' for a in spec.when[1])
+                description += f" (only with {which})"
+            out.append(f"| `{name}.{k}` | {spec.type.name} | {_md(spec.default_text())} | "
+                       f"{_md(spec.type.allowed())} | {_md(description)} |")
+    return "\n".join(out) + "\n"
+
+
+def _md(text):
+    return str(text).replace("|", "\\|")
