@@ -23,6 +23,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from . import protocol
 from .log import configure, get_logger, report_failure, timed
 
 #: Exit status of a user error (invalid scene, existing output, ...).
@@ -105,8 +106,11 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
     output = Path(output)
     petsc_args = list(scene.solver.petsc_args()) + list(petsc_args)
 
-    check_output_path(output, comm, overwrite)  # before any expensive work
-    log.info("%d rank%s; result file %s", comm.size, "" if comm.size == 1 else "s", output)
+    resume = _resume_decision(scene, output, comm, overwrite)
+    if not resume:
+        check_output_path(output, comm, overwrite)  # before any expensive work
+    log.info("%d rank%s; result file %s%s", comm.size, "" if comm.size == 1 else "s", output,
+             " (continuing an interrupted run)" if resume else "")
     with timed(log, f"planning FFTs ({scene.solver.planner})"):
         grid = make_grid(scene, comm)
     with timed(log, "making the surface"):
@@ -118,25 +122,238 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
     provenance = {"scene": scene.text, "scene_path": str(Path(scene.path).resolve())
                   if scene.path else "", "scene_resolved": scene.to_json(),
                   "petsc_options": shlex.join(petsc_args)}
-    steps = []
-    with ResultFile.create(output, comm, overwrite=overwrite, provenance=provenance) as result:
-        attrs = {"statistics": stats} if scene.output.statistics else None
-        if "topography" in scene.output.fields:
-            result.write_field("topography", grid, topography, attrs=attrs)
-        elif attrs:
-            result.set_attrs(result.root, {"topography": attrs})
-        result.flush()
-        if scene.control.kind != "none":
-            # The lead's sweep goes here: for each value, result.begin_step(i, ...),
-            # solve (warm-started), result.write_field(..., group=step), then
-            # result.end_step(step, attrs={"statistics": ..., "solver": ...}).
-            log.warning("the contact solve (control.kind = %r, %d value%s) is not available yet; "
-                        "%s holds the surface only", scene.control.kind,
-                        len(scene.control.values), "" if len(scene.control.values) == 1 else "s",
-                        output)
+    if not resume:
+        with ResultFile.create(output, comm, overwrite=overwrite, provenance=provenance) as result:
+            attrs = {"statistics": stats} if scene.output.statistics else None
+            if "topography" in scene.output.fields:
+                result.write_field("topography", grid, topography, attrs=attrs)
+            elif attrs:
+                result.set_attrs(result.root, {"topography": attrs})
+            result.close(complete=not protocol.plan(scene))
+    steps = _run_steps(scene, grid, topography, stats, output, petsc_args, log, resume)
+    if steps is not None:
+        with ResultFile.open_for_append(output, comm) as result:
+            result.close(complete=True)
     log.info("wrote %s", output)
     return RunResult(output=output, grid=grid, topography=topography, statistics=stats,
-                     steps=steps)
+                     steps=steps or [])
+
+
+def _resume_decision(scene, output, comm, overwrite):
+    """True if ``output`` is this scene's own interrupted run, to be continued.
+
+    Decided on rank 0 and broadcast.  A complete file, or one made from another
+    scene, is left alone (the usual refusal follows unless ``--overwrite``).
+    """
+    from .hdf5 import ResultFile
+    decision = None
+    if comm.rank == 0 and not overwrite and Path(output).exists():
+        try:
+            import h5py
+            with h5py.File(output, "r") as f:
+                same = f.attrs.get("scene") == scene.text
+                decision = same and not bool(f.attrs.get("complete", False))
+        except (OSError, ImportError):
+            decision = False
+    decision = comm.bcast(decision, root=0)
+    if decision:
+        with ResultFile.open_for_resume(output, comm) as result:
+            result.close(complete=False)
+    return bool(decision)
+
+
+def _petsc_options_dict(args):
+    """``["-a", "1", "-b"]`` -> ``{"a": "1", "b": ""}``."""
+    options, i = {}, 0
+    args = list(args)
+    while i < len(args):
+        name = args[i].lstrip("-")
+        if i + 1 < len(args) and not (args[i + 1].startswith("-") and
+                                      not _is_number(args[i + 1])):
+            options[name] = args[i + 1]
+            i += 2
+        else:
+            options[name] = ""
+            i += 1
+    return options
+
+
+def _is_number(text):
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+def _run_steps(scene, grid, topography, stats, output, petsc_args, log, resume):
+    """Solve the scene's steps in order, writing each as soon as it is done.
+
+    The result file is closed while a step is being solved and reopened to
+    write it, so a process killed mid-solve leaves every finished step
+    readable; a SIGTERM that arrives while a step is being written is held
+    until the write is over.  Steps already complete in the file (a resumed
+    run) are read back instead of solved, and warm-start the next ones.
+    Returns the list of step summaries, or None if the scene has no steps.
+    """
+    from .contact import ContactProblem, MeanGap
+    from .elastic import ElasticHalfSpace
+    from .hdf5 import ResultFile
+    from .interaction import ExponentialAdhesion, check_resolution
+    from .solver import annotate_step, solve
+
+    steps = protocol.plan(scene)
+    if not steps:
+        return None
+    comm = grid.comm
+    half_space = ElasticHalfSpace(grid, scene.material.contact_modulus)
+    problems = {False: ContactProblem(grid, topography, half_space)}
+    interaction = scene.interaction
+    if interaction.kind == "exponential":
+        adhesion = ExponentialAdhesion(interaction.work_of_adhesion, interaction.range)
+        report = check_resolution(adhesion, min(grid.dx, grid.dy), scene.material.contact_modulus,
+                                  interaction.resolution_check)
+        log.info("adhesion: %s", report["message"])
+        problems[True] = ContactProblem(grid, topography, half_space, adhesion)
+    options = _petsc_options_dict(petsc_args)
+    fields = scene.output.fields
+    done = {}
+    if resume:
+        with ResultFile.open(output, comm) as result:
+            for index in result.completed_steps():
+                done[index] = _read_step(result, index, grid, fields)
+            result.close(complete=False)
+    previous_in_chain, rates, summaries = {}, {}, []
+    for step in steps:
+        if step.index in done:
+            state = done[step.index]
+            rates[step.chain] = annotate_step(state, previous_in_chain.get(step.chain),
+                                              rates.get(step.chain))
+            previous_in_chain[step.chain] = state
+            summaries.append(state.summary)
+            log.info("step %d (%s): complete in the file, not recomputed", step.index, step.chain)
+            continue
+        problem = problems[step.adhesive]
+        control = step.control
+        if control is None:
+            reference = done.get(step.reference_step) or summaries[step.reference_step]
+            control = MeanGap(reference.mean_gap if hasattr(reference, "mean_gap")
+                              else reference["mean_gap"])
+        log.info("step %d (%s): %s = %.6g", step.index, step.chain, control.kind, control.value)
+        progress = _progress(log, step.index)
+        previous = previous_in_chain.get(step.chain)
+        solution = solve(problem, control, solver=scene.solver.tao_type,
+                         tolerance=scene.solver.tolerance,
+                         max_iterations=scene.solver.max_iterations,
+                         initial=previous if hasattr(previous, "gap") and previous.gap is not None
+                         else None, options=options, monitor=progress)
+        rates[step.chain] = annotate_step(solution, previous, rates.get(step.chain))
+        _log_solution(log, step, solution)
+        scalars = solution.scalars()
+        attrs = {"plan": step.attrs(), "solution": scalars,
+                 "interaction": {"kind": "exponential" if step.adhesive else "hard-wall",
+                                 "work_of_adhesion": interaction.work_of_adhesion
+                                 if step.adhesive else None,
+                                 "range": interaction.range if step.adhesive else None},
+                 "contact_modulus": scene.material.contact_modulus,
+                 "surface": {"rms_height": stats.rms_height, "rms_slope": stats.rms_slope,
+                             "rms_curvature": stats.rms_curvature},
+                 "pixel_size": [grid.dx, grid.dy]}
+        with _hold_sigterm(), ResultFile.open_for_append(output, comm) as result:
+            group = result.begin_step(step.index, attrs=attrs)
+            if "gap" in fields:
+                result.write_field("gap", grid, solution.gap, group=group)
+            if "pressure" in fields:
+                result.write_field("pressure", grid, solution.pressure, group=group)
+            if "displacement" in fields:
+                # u = g - d + h up to the rigid-body constant; stored with zero mean
+                u = solution.gap + topography
+                u -= grid.mean(u)
+                result.write_field("displacement", grid, u, group=group)
+            result.end_step(group)
+            result.close(complete=False)
+        summary = dict(scalars, index=step.index, chain=step.chain)
+        solution.summary = summary
+        previous_in_chain[step.chain] = solution
+        done[step.index] = solution
+        summaries.append(summary)
+    return summaries
+
+
+class _SavedState:
+    """A completed step read back from the file: enough to warm-start and chain."""
+
+    def __init__(self, gap, pressure, attrs, control):
+        self.gap, self.pressure, self.control = gap, pressure, control
+        self.mean_gap = attrs["solution.mean_gap"]
+        self.mean_pressure = attrs["solution.mean_pressure"]
+        self.contact_fraction = attrs["solution.contact_fraction"]
+        self.summary = {k[len("solution."):]: v for k, v in attrs.items()
+                        if k.startswith("solution.")}
+
+
+def _read_step(result, index, grid, fields):
+    from .contact import Load, MeanGap
+    group = result.step(index)
+    attrs = result.attrs(group)
+    kind, value = attrs["solution.control"], attrs["solution.control_value"]
+    control = Load(value) if kind == "load" else MeanGap(value)
+    gap = result.read_field("gap", grid, group=group) if "gap" in group else None
+    pressure = result.read_field("pressure", grid, group=group) if "pressure" in group else None
+    if gap is None or pressure is None:
+        gap = pressure = None  # no fields to warm-start from: the next step starts cold
+    return _SavedState(gap, pressure, attrs, control)
+
+
+class _hold_sigterm:
+    """Delay SIGTERM until a collective write is over, then act on it."""
+
+    def __enter__(self):
+        import signal
+        self.pending = False
+        self.signal = signal
+
+        def handler(signum, frame):
+            self.pending = True
+        try:
+            self.old = signal.signal(signal.SIGTERM, handler)
+        except ValueError:  # not the main thread
+            self.old = None
+        return self
+
+    def __exit__(self, *exc):
+        if self.old is not None:
+            self.signal.signal(self.signal.SIGTERM, self.old)
+            if self.pending:
+                self.signal.raise_signal(self.signal.SIGTERM)
+        return False
+
+
+def _progress(log, index, every=5.0):
+    """A solver monitor that logs (rank 0) at most every ``every`` seconds."""
+    import time
+    last = [time.perf_counter()]
+    start = last[0]
+
+    def monitor(iteration, residual):
+        now = time.perf_counter()
+        if now - last[0] >= every:
+            last[0] = now
+            log.info("  step %d: iteration %d, KKT residual %.3e, %.1f s", index, iteration,
+                     residual, now - start)
+    return monitor
+
+
+def _log_solution(log, step, solution):
+    status = "converged" if solution.converged else f"NOT converged ({solution.reason})"
+    log.info("  step %d %s after %d iterations (%d FFT pairs, %.2f s): c = %.5g, mean gap = %.6g, "
+             "mean pressure = %.6g, KKT = %.2e/%.2e%s", step.index, status, solution.iterations,
+             solution.operator_applications, solution.wall_time, solution.contact_fraction,
+             solution.mean_gap, solution.mean_pressure, solution.kkt_pressure, solution.kkt_gap,
+             ", jump" if solution.jump else "")
+    if not solution.converged:
+        log.warning("step %d did not converge: %s; stored with converged = False",
+                    step.index, solution.reason)
 
 
 def _log_statistics(log, stats):

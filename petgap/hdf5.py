@@ -356,6 +356,21 @@ class ResultFile:
         return self
 
     @classmethod
+    def open_for_append(cls, path, comm=None):
+        """Reopen a result file of the current run to add a step (collective).
+
+        Unlike :meth:`open_for_resume` it changes no root attribute: a run
+        keeps its file closed while it solves, so that a process killed in the
+        middle of a solve cannot leave the file half-written, and reopens it
+        only to write each finished step.
+        """
+        require_parallel_h5py()
+        comm = _default_comm(comm)
+        path = Path(path)
+        _root_decides(comm, lambda: _check_is_result(path))
+        return cls(h5py.File(path, "r+", driver="mpio", comm=comm), path, comm, writable=True)
+
+    @classmethod
     def open(cls, path, comm=None):
         """Open a result file read-only on every rank of ``comm`` (collective)."""
         require_parallel_h5py()

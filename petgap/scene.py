@@ -547,9 +547,13 @@ class SolverSection:
     leading dash; options given after ``--`` on the command line come later and
     take precedence.
     """
-    tao_type: str = key(Choice("pcg", "bncg", "blmvm", "bqnls", "gpcg"), "pcg",
-                        "pcg: petgap's projected conjugate gradients; the others are TAO "
-                        "bound-constrained solvers")
+    tao_type: str = key(Choice("pcg", "pcg-pressure", "pcg-gap", "bncg", "blmvm", "bqnls",
+                               "gpcg"), "pcg",
+                        "pcg: petgap's preconditioned projected conjugate gradients (on the "
+                        "pressure for non-adhesive load control, on the gap otherwise; "
+                        "pcg-pressure / pcg-gap force one); the others are TAO "
+                        "bound-constrained solvers on the gap (much slower; see "
+                        "docs/benchmarks.md)")
     tolerance: float = key(Float(0, 0.1, min_open=True), 1e-8,
                            "relative convergence tolerance (KKT violation in pressure / (h0' E*), "
                            "mean-constraint residual / h0)")

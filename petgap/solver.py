@@ -144,20 +144,31 @@ def sweep(problem, controls, **kwargs):
       which one was found is recorded, never averaged away.
     """
     previous = kwargs.pop("initial", None)
-    last_rate = 0.0
+    last_rate = None
     for control in controls:
         solution = solve(problem, control, initial=previous, **kwargs)
-        solution.direction, solution.jump = "start", False
-        if previous is not None:
-            change = control.value - previous.control.value
-            pushes = change > 0 if isinstance(control, Load) else change < 0
-            solution.direction = "loading" if pushes else "unloading"
-            dc = solution.contact_fraction - previous.contact_fraction
-            rate = abs(dc / change) if change != 0 else (math.inf if dc else 0.0)
-            solution.jump = bool(abs(dc) > 0.01 and rate > 3 * last_rate)
-            last_rate = rate
+        last_rate = annotate_step(solution, previous, last_rate)
         previous = solution
         yield solution
+
+
+def annotate_step(solution, previous, last_rate):
+    """Set ``solution.direction`` and ``solution.jump`` relative to ``previous`` (see :func:`sweep`).
+
+    Returns the rate of change of the repulsive area per unit control, for the
+    next step's comparison (None when there is no previous step to compare
+    with: the first step of a sweep has no reference and is never a jump).
+    """
+    solution.direction, solution.jump = "start", False
+    if previous is None or previous.control.kind != solution.control.kind:
+        return None
+    change = solution.control.value - previous.control.value
+    pushes = change > 0 if isinstance(solution.control, Load) else change < 0
+    solution.direction = "loading" if pushes else "unloading"
+    dc = solution.contact_fraction - previous.contact_fraction
+    rate = abs(dc / change) if change != 0 else (math.inf if dc else 0.0)
+    solution.jump = bool(last_rate is not None and abs(dc) > 0.01 and rate > 3 * last_rate)
+    return rate
 
 
 # --------------------------------------------------------------------- TAO
