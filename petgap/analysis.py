@@ -1,4 +1,4 @@
-"""From solved fields to the paper's quantities: contact area, perimeter, gap distribution, adhesion.
+"""From solved fields to the paper's quantities: contact area, perimeter, gaps, adhesion.
 
 Every function works on a :class:`~petgap.grid.Grid`'s row slabs, ``(nx_local, ny)``,
 and returns global results that are the same on every rank (all functions are
@@ -41,7 +41,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from mpi4py import MPI
 
-__all__ = ["contact_mask", "resolve_gap_tolerance", "GAP_ROUND_OFF", "perimeter", "crossing_fraction", "contact_statistics",
+__all__ = ["contact_mask", "resolve_gap_tolerance", "GAP_ROUND_OFF", "perimeter",
+           "crossing_fraction", "contact_statistics",
            "gap_distribution", "collapse", "fit_power_law", "near_contact_area",
            "near_contact_area_eq14", "attractive_force_measured", "attractive_force_eq16",
            "inverse_kappa_att", "fig4_integrand", "PerimeterResult", "ContactStatistics",
@@ -82,7 +83,7 @@ def _local_rows(grid):
 
 
 def _check_fields(grid, **arrays):
-    """The arrays as float64 (bool for ``mask``) of this rank's slab shape, or ValueError on all ranks.
+    """The arrays as float64 (bool for ``mask``) in this rank's slab shape; else ValueError everywhere.
 
     ``None`` values are passed through.  Non-finite values are refused as well: a
     NaN in a gap would silently drop out of every count below.
@@ -98,7 +99,8 @@ def _check_fields(grid, **arrays):
         if arr.shape != shape and problem is None:
             problem = f"{name} has shape {arr.shape}, but this rank's slab is {shape}"
         elif arr.dtype != bool and not np.all(np.isfinite(arr)) and problem is None:
-            problem = f"{name} has non-finite values ({np.count_nonzero(~np.isfinite(arr))} of them)"
+            bad = np.count_nonzero(~np.isfinite(arr))
+            problem = f"{name} has non-finite values ({bad} of them)"
         out[name] = arr
     problems = grid.comm.allgather(problem)
     for rank, p in enumerate(problems):
@@ -616,10 +618,12 @@ def _edge_cosines(edge_cells, slots, qx, qy, has, t, dx, dy, along_x):
     sa, sb = slots
     n = a.size
     # point of the crossing itself, in the coordinates of cell a (and of cell b)
-    if along_x:   # x-edge: slot 0 of a at (t dx, 0); slot 2 of b at (t dx, dy), b one row of cells lower in y
+    # x-edge: slot 0 of cell a at (t dx, 0), slot 2 of cell b = a shifted by -dy;
+    # y-edge: slot 3 of cell a at (0, t dy), slot 1 of cell b = a shifted by -dx.
+    if along_x:
         xa, ya = t * dx, np.zeros(n)
         shift = (0.0, dy)     # cell b's origin is (0, -dy) from cell a's
-    else:         # y-edge: slot 3 of a at (0, t dy); slot 1 of b at (dx, t dy), b one cell lower in x
+    else:
         xa, ya = np.zeros(n), t * dy
         shift = (dx, 0.0)
     ok_a = (a >= 0)

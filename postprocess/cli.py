@@ -1,0 +1,778 @@
+"""The ``petgap-post`` command: tables and figures of the paper from petgap result files.
+
+Usage::
+
+    mpirun -n P petgap-post RUN.h5[:STEP] [RUN2.h5 ...] [--output-dir DIR] [--bins N]
+                            [--reference RUN.h5[:STEP]] [--format png|pdf|svg]
+                            [--fit-range LO HI] [--gap-tolerance G] [--overwrite] [--quiet]
+
+(or without ``mpirun``, serially).  Every step group (``step_0000``, ...) of every
+file is analysed, or only ``STEP`` (an integer or ``step_NNNN``) where given.
+The fields are read collectively, each rank its slab (:func:`petgap.hdf5.read_field`),
+and analysed with :mod:`petgap.analysis`; rank 0 writes into ``DIR``:
+
+``gap-analysis.csv``, ``gap-analysis.json``
+    One row per file/step: contact fraction ``c``, ``A_rep``, ``P_rep`` (and the raw
+    pixel-edge length), ``d_rep`` (Eq. 2), ``g0`` (Eq. 12), the fitted exponent and
+    power-law range of the collapsed gap distribution (Eq. 13;
+    :func:`petgap.analysis.fit_power_law`) and the exponent over the fixed
+    ``--fit-range``, the near-contact area ``c_n`` at ``g_c = g0``, ``0.18 g0`` and
+    ``1e-3 g0`` against Eq. 14, for adhesive runs ``F_att`` measured (Eq. 15, all
+    pixels, and its non-contact part) against Eq. 16 as printed and exact
+    (``Gamma(2/3)`` times larger), ``1/kappa_att`` from each, and ``kappa_rep``
+    (``A_rep h0' E* / F_rep`` with ``F_rep`` the wall reaction ``sum (p + v'(0))``
+    over contact pixels).  The JSON file also holds the conventions and each
+    step's histogram.  Missing values are empty in the CSV and ``null`` in the JSON.
+
+``fig2-gap-distribution.FMT``
+    Fig. 2: collapsed ``p(g)`` against ``g / g0`` (log-log), one series per
+    file/step, with the dashed ``(g/g0)^(-1/3)`` line of Eq. 13.
+``fig3-adhesion.FMT``
+    Fig. 3: adhesive series normalised by ``c`` and ``g0`` of a non-adhesive
+    reference step, labelled by ``1/kappa_att``; dotted line at ``rho / g0``.
+    The reference is ``--reference`` (then every other step is normalised by
+    it) or, for runs of the paper's protocol (``control.reference =
+    "non-adhesive"``), each adhesive step's own reference step (step attribute
+    ``plan.reference_step``).  Without either, no Fig. 3 is written.
+``fig4-integrand.FMT``
+    Fig. 4: the normalised integrand of Eq. 16 for ``rho / g0 = 0.01, 0.1, 1``.
+
+The zero-gap tolerance (``--gap-tolerance``, default ``1e-6`` of the mean gap;
+:func:`petgap.analysis.resolve_gap_tolerance`) decides which pixels are at zero
+gap: solvers leave round-off gaps on contact pixels, and with exact zeros
+demanded a Polonsky-Keer 512^2 solution loses a third of its contact area.
+
+Attributes read from a result file (first found wins; the step group's own
+attributes, then the root's, then the ``topography`` dataset's, then the JSON
+of the validated scene in the root attribute ``scene_resolved``):
+
+* ``rms_slope`` / ``statistics.rms_slope`` / ``topography.statistics.rms_slope`` /
+  ``surface.rms_slope``: ``h0'``; if none is there, it is computed spectrally
+  from the ``topography`` dataset.
+* ``contact_modulus`` / ``material.contact_modulus``: ``E*``.
+* ``interaction.kind`` (``"hard-wall"`` or ``"exponential"``), and for the
+  latter ``interaction.work_of_adhesion`` and ``interaction.range`` (``w``, ``rho``).
+* ``pixel_size`` (``[dx, dy]``), else ``grid.a0`` / ``a0`` (square pixels); the
+  grid shape is the datasets' shape.
+* optional: ``surface.lambda_min``, ``surface.lambda_max`` (legends);
+  ``plan.chain``, ``plan.reference_step`` (Fig. 3 of a protocol run);
+  ``solution.contact_fraction``, ``solution.kappa_rep``, ``solution.inv_kappa_att``
+  (the solver's own values, tabled next to the analysis' as a cross-check).
+
+Each step group needs the datasets ``gap`` and ``pressure``.  Steps whose
+``complete`` attribute is not True are skipped with a warning (or refused, if
+asked for by number).
+
+Errors: a missing or unreadable file, a file that is not a petgap result, a
+missing step, dataset or attribute, existing outputs (without ``--overwrite``):
+``petgap-post: error: <message naming the file, step and item>`` from rank 0,
+exit status 2 on every rank.
+"""
+import os
+
+os.environ.setdefault("H5PY_ALWAYS_USE_MPI", "1")  # before h5py is first imported
+
+import argparse  # noqa: E402
+import csv  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import re  # noqa: E402
+import sys  # noqa: E402
+from dataclasses import dataclass, field  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+#: Exit status of a user error.
+EXIT_USAGE = 2
+
+TABLE_STEM = "gap-analysis"
+FIG2_STEM = "fig2-gap-distribution"
+FIG3_STEM = "fig3-adhesion"
+FIG4_STEM = "fig4-integrand"
+#: rho / g0 of the Fig. 4 curves (the paper's).
+FIG4_RHO_OVER_G0 = (0.01, 0.1, 1.0)
+#: Cut-off gaps g_c / g0 of the near-contact-area columns (Eq. 14): at g0, c_n = pi c;
+#: at 0.18 g0, c_n = c; at 1e-3 g0 (the roll-off of the paper's data), c_n = 0.031 c.
+GC_OVER_G0 = (1.0, 0.18, 1e-3)
+#: Gaps below this fraction of g0 are solver round-off rather than physics; if they make
+#: up more than ROUND_OFF_WARN of the contact area a warning suggests --gap-tolerance.
+ROUND_OFF_GAP = 1e-6
+ROUND_OFF_WARN = 0.01
+
+#: Table columns, in order.
+COLUMNS = [
+    "file", "step", "chain", "reference_step", "nx", "ny", "dx", "dy", "lambda_min",
+    "lambda_max", "interaction",
+    "work_of_adhesion", "range", "rms_slope", "rms_slope_source", "contact_modulus",
+    "gap_tolerance", "contact_pixels", "c", "A_rep", "P_rep", "P_pixel_edges", "d_rep", "g0",
+    "mean_pressure", "kappa_rep", "exponent", "power_law_x_min", "power_law_x_max",
+    "power_law_decades", "exponent_fixed_range", "fixed_range_x_min", "fixed_range_x_max",
+    "zero_gap_fraction", "cn_g0", "cn_g0_eq14", "cn_018g0", "cn_018g0_eq14", "cn_0001g0",
+    "cn_0001g0_eq14",
+    "F_att", "F_att_noncontact", "F_att_eq16_printed", "F_att_eq16_exact",
+    "inv_kappa_att", "inv_kappa_att_eq16_printed", "inv_kappa_att_eq16_exact",
+    "c_solver", "kappa_rep_solver", "inv_kappa_att_solver",
+]
+
+
+class PostError(ValueError):
+    """A user error (missing file, step, dataset or attribute); exit status 2."""
+
+
+# ------------------------------------------------------------------- inputs
+@dataclass(frozen=True)
+class Input:
+    """A result file and optionally one step of it."""
+    path: Path
+    step: int = None
+
+    @property
+    def text(self):
+        return str(self.path) if self.step is None else f"{self.path}:{self.step}"
+
+
+_STEP_SUFFIX = re.compile(r"(.+):(?:step_)?(\d+)")
+
+
+def parse_input(text):
+    """``FILE`` or ``FILE:STEP`` (``STEP`` = ``3`` or ``step_0003``) -> :class:`Input`.
+
+    A path that exists as written is taken as a file even if it ends in ``:<digits>``.
+    """
+    m = _STEP_SUFFIX.fullmatch(text)
+    if m and not Path(text).exists():
+        return Input(Path(m.group(1)), int(m.group(2)))
+    return Input(Path(text))
+
+
+def _check_result_file(path):
+    """Rank 0: raise PostError unless ``path`` is a readable petgap result file."""
+    import h5py
+    if not path.exists():
+        raise PostError(f"{path}: file not found")
+    if not path.is_file():
+        raise PostError(f"{path}: not a file")
+    try:
+        ok = h5py.is_hdf5(str(path))
+    except OSError as exc:
+        raise PostError(f"{path}: cannot read: {exc}") from None
+    if not ok:
+        raise PostError(f"{path}: not an HDF5 file (and so not a petgap result file)")
+    with h5py.File(path, "r") as f:
+        if "petgap_version" not in f.attrs:
+            raise PostError(f"{path}: not a petgap result file (no root attribute "
+                            f"'petgap_version')")
+
+
+def _root_decides(comm, func):
+    """``func()`` on rank 0; its value, or its exception, on every rank."""
+    result = None
+    if comm.rank == 0:
+        try:
+            result = ("ok", func())
+        except Exception as exc:  # re-raised on every rank below
+            result = ("error", exc)
+    status, value = comm.bcast(result, root=0)
+    if status == "error":
+        raise value
+    return value
+
+
+# --------------------------------------------------------------- attributes
+def _flatten(mapping, prefix=""):
+    out = {}
+    for k, v in mapping.items():
+        if isinstance(v, dict):
+            out.update(_flatten(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+class Attributes:
+    """The attribute sources of one step, searched in order."""
+
+    def __init__(self, where, sources):
+        self.where = where          # "FILE, step_0000"
+        self.sources = sources      # [(label, dict)]
+
+    def find(self, names, what, required=True, kind=float):
+        """``(value, "label: name")`` of the first attribute found, else PostError or None."""
+        for label, attrs in self.sources:
+            for name in names:
+                value = attrs.get(name)
+                if value is None:
+                    continue
+                try:
+                    return kind(value), f"{label}: {name}"
+                except (TypeError, ValueError):
+                    raise PostError(f"{self.where}: attribute {name!r} ({label}) = {value!r} "
+                                    f"is not a valid {what}") from None
+        if required:
+            looked = ", ".join(repr(n) for n in names)
+            where = ", ".join(label for label, _ in self.sources)
+            raise PostError(f"{self.where}: missing attribute {names[0]!r} ({what}); looked for "
+                            f"{looked} in the {where}")
+        return None, None
+
+
+def step_attributes(result, index):
+    """:class:`Attributes` of step ``index`` of an open :class:`petgap.hdf5.ResultFile`."""
+    from petgap.hdf5 import read_attrs, step_name
+    f = result.file
+    name = step_name(index)
+    sources = [(f"{name} attributes", read_attrs(f[name])), ("root attributes", read_attrs(f))]
+    if "topography" in f:
+        sources.append(("topography dataset attributes", read_attrs(f["topography"])))
+    scene = sources[1][1].get("scene_resolved")
+    if scene:
+        try:
+            sources.append(("scene_resolved", _flatten(json.loads(scene))))
+        except (TypeError, ValueError):
+            raise PostError(f"{result.path}: root attribute 'scene_resolved' is not valid JSON") \
+                from None
+    return Attributes(f"{result.path}, {name}", sources)
+
+
+# ----------------------------------------------------------------- analysis
+@dataclass
+class StepResult:
+    """One analysed step: its table row and its curves (the same on every rank)."""
+    row: dict
+    distribution: object
+    x: np.ndarray
+    y: np.ndarray
+    label: str
+    adhesive: bool
+    meta: dict = field(default_factory=dict)
+
+
+def analyse_step(result, index, args, grids, comm, log):
+    """Analyse step ``index`` of an open result file (collective)."""
+    from petgap import analysis
+    from petgap.grid import Grid
+    from petgap.hdf5 import read_field, step_name
+
+    f = result.file
+    name = step_name(index)
+    where = f"{result.path}, {name}"
+    group = f[name]
+    for dataset in ("gap", "pressure"):
+        if dataset not in group:
+            raise PostError(f"{where}: dataset {dataset!r} missing (a petgap-post input needs "
+                            f"the 'gap' and 'pressure' fields of each step)")
+    shape = tuple(int(n) for n in group["gap"].shape)
+    if len(shape) != 2 or tuple(group["pressure"].shape) != shape:
+        raise PostError(f"{where}: 'gap' {tuple(group['gap'].shape)} and 'pressure' "
+                        f"{tuple(group['pressure'].shape)} are not 2D fields of one shape")
+    attrs = step_attributes(result, index)
+    pixel, _ = attrs.find(["pixel_size"], "pixel size [dx, dy]", required=False,
+                          kind=lambda v: tuple(float(x) for x in np.ravel(v)))
+    if pixel is None:
+        a0, _ = attrs.find(["grid.a0", "a0", "pixel_size"], "pixel size")
+        pixel = (a0, a0)
+    if len(pixel) != 2 or not all(math.isfinite(v) and v > 0 for v in pixel):
+        raise PostError(f"{where}: pixel size {pixel} is not two positive numbers")
+    dx, dy = pixel
+    modulus, _ = attrs.find(["contact_modulus", "material.contact_modulus"], "contact modulus")
+    kind, _ = attrs.find(["interaction.kind", "interaction"], "interaction kind", kind=str)
+    if kind not in ("hard-wall", "exponential"):
+        raise PostError(f"{where}: interaction.kind = {kind!r} is not known to petgap-post "
+                        f"(hard-wall or exponential)")
+    adhesive = kind == "exponential"
+    w = rho = None
+    if adhesive:
+        w, _ = attrs.find(["interaction.work_of_adhesion", "work_of_adhesion"], "work of adhesion")
+        rho, _ = attrs.find(["interaction.range", "range"], "interaction range")
+    lmin, _ = attrs.find(["surface.lambda_min", "lambda_min"], "lambda_min", required=False)
+    lmax, _ = attrs.find(["surface.lambda_max", "lambda_max"], "lambda_max", required=False)
+
+    key = (shape, dx, dy)
+    if key not in grids:
+        from petgap.grid import DecompositionError
+        grids.clear()  # one grid at a time: its FFT buffers are 16 bytes per point
+        try:
+            grids[key] = Grid(shape, size=(shape[0] * dx, shape[1] * dy), comm=comm,
+                              planner="estimate", wisdom=False)
+        except DecompositionError as exc:
+            raise PostError(f"{where}: {exc}") from None
+    grid = grids[key]
+
+    slope, slope_source = attrs.find(["rms_slope", "statistics.rms_slope",
+                                      "topography.statistics.rms_slope", "surface.rms_slope"],
+                                     "rms slope", required=False)
+    if slope is None:
+        if "topography" not in f:
+            raise PostError(f"{where}: missing attribute 'rms_slope' (rms slope h0'); looked for "
+                            f"'rms_slope', 'statistics.rms_slope', "
+                            f"'topography.statistics.rms_slope', 'surface.rms_slope', and there "
+                            f"is no 'topography' dataset to compute it from")
+        from petgap.surface import statistics
+        if tuple(f["topography"].shape) != shape:
+            raise PostError(f"{where}: 'topography' has shape {tuple(f['topography'].shape)}, "
+                            f"the step's fields {shape}")
+        slope = statistics(grid, read_field(f, "topography", grid)).rms_slope
+        slope_source = "computed from the topography dataset"
+
+    gap = read_field(group, "gap", grid)
+    pressure = read_field(group, "pressure", grid)
+
+    tol = analysis.resolve_gap_tolerance(grid, gap, args.gap_tolerance)
+    stats = analysis.contact_statistics(grid, gap, pressure, slope, modulus, gap_tolerance=tol)
+    dist = analysis.gap_distribution(grid, gap, pressure, bins_per_decade=args.bins,
+                                     gap_tolerance=tol)
+    c, g0 = stats.contact_fraction, stats.g0
+    chain, _ = attrs.find(["plan.chain"], "chain", required=False, kind=str)
+    ref_step, _ = attrs.find(["plan.reference_step"], "reference step", required=False, kind=int)
+    ref_step = ref_step if ref_step is not None and ref_step >= 0 else None
+    solver = {name: attrs.find([f"solution.{name}"], name, required=False)[0]
+              for name in ("contact_fraction", "kappa_rep", "inv_kappa_att")}
+    row = {k: None for k in COLUMNS}
+    row.update(file=str(result.path), step=int(index), chain=chain, reference_step=ref_step,
+               c_solver=solver["contact_fraction"], kappa_rep_solver=solver["kappa_rep"],
+               inv_kappa_att_solver=solver["inv_kappa_att"] if adhesive else None,
+               nx=shape[0], ny=shape[1], dx=dx, dy=dy,
+               lambda_min=lmin, lambda_max=lmax, interaction=kind, work_of_adhesion=w,
+               range=rho, rms_slope=slope, rms_slope_source=slope_source,
+               contact_modulus=modulus, contact_pixels=stats.contact_pixels, c=c,
+               A_rep=stats.contact_area, P_rep=stats.perimeter,
+               P_pixel_edges=stats.pixel_edge_length, d_rep=stats.mean_diameter, g0=g0,
+               mean_pressure=stats.mean_pressure, kappa_rep=stats.kappa_rep,
+               zero_gap_fraction=dist.zero_gap_fraction, gap_tolerance=tol)
+    x = y = np.empty(0)
+    usable = 0 < c < 1 and math.isfinite(g0) and g0 > 0
+    if usable and dist.centres.size:
+        x, y = analysis.collapse(dist, None, c, g0)
+        fit = analysis.fit_power_law(x, y)
+        fixed = analysis.fit_power_law(x, y, x_range=args.fit_range)
+        row.update(exponent=fit.exponent, power_law_x_min=fit.x_min,
+                   power_law_x_max=fit.x_max, power_law_decades=fit.decades,
+                   exponent_fixed_range=fixed.exponent, fixed_range_x_min=args.fit_range[0],
+                   fixed_range_x_max=args.fit_range[1])
+    if usable:
+        near = analysis.near_contact_area(grid, gap, pressure,
+                                          [r * g0 for r in GC_OVER_G0 + (ROUND_OFF_GAP,)],
+                                          c=c, g0=g0, gap_tolerance=tol)
+        row.update(cn_g0=near.measured[0], cn_g0_eq14=near.predicted[0],
+                   cn_018g0=near.measured[1], cn_018g0_eq14=near.predicted[1],
+                   cn_0001g0=near.measured[2], cn_0001g0_eq14=near.predicted[2])
+        if near.measured[3] > ROUND_OFF_WARN * c:
+            log.warning("%s: %.3g of the area (%.0f %% of the contact area) has gaps below "
+                        "%g g0 = %.3g outside contact: round-off gaps of contact pixels? "
+                        "--gap-tolerance sets the gap that counts as zero", where, near.measured[3],
+                        100 * near.measured[3] / c, ROUND_OFF_GAP, ROUND_OFF_GAP * g0)
+    else:
+        log.warning("%s: contact fraction %g: no d_rep/g0, so no collapse, fit or c_n", where, c)
+    if adhesive:
+        from petgap.interaction import ExponentialAdhesion
+        force = analysis.attractive_force_measured(grid, gap, ExponentialAdhesion(w, rho),
+                                                   pressure=pressure, gap_tolerance=tol)
+        # with adhesion the wall reaction in contact is p + v'(0): F_rep = F - F_att
+        f_rep = stats.repulsive_force - force.contact_force
+        scale = stats.contact_area * slope * modulus
+        row.update(F_att=force.force, F_att_noncontact=force.noncontact_force,
+                   inv_kappa_att=analysis.inverse_kappa_att(force.force, slope, modulus,
+                                                            stats.contact_area),
+                   kappa_rep=scale / f_rep if f_rep > 0 else math.nan)
+        if usable:
+            eq16 = analysis.attractive_force_eq16(w, rho, g0, stats.contact_area)
+            row.update(F_att_eq16_printed=eq16.printed, F_att_eq16_exact=eq16.exact,
+                       inv_kappa_att_eq16_printed=analysis.inverse_kappa_att(
+                           eq16.printed, slope, modulus, stats.contact_area),
+                       inv_kappa_att_eq16_exact=analysis.inverse_kappa_att(
+                           eq16.exact, slope, modulus, stats.contact_area))
+    label = f"$\\lambda_{{max}}/\\lambda_{{min}}$ = {lmax / lmin:g}" if lmin and lmax else None
+    meta = {"lambda_min_a0": lmin / dx if lmin else None, "rho": rho, "reference_step": ref_step}
+    log.info("%s: c = %.4g, P_rep = %.6g (pixel edges %.6g), d_rep = %.4g, g0 = %.4g%s", where,
+             c, stats.perimeter, stats.pixel_edge_length, stats.mean_diameter, g0,
+             f", exponent {row['exponent']:.3f} over x = {row['power_law_x_min']:.3g} .. "
+             f"{row['power_law_x_max']:.3g}" if row["exponent"] is not None
+             and math.isfinite(row["exponent"]) else "")
+    return StepResult(row=row, distribution=dist, x=x, y=y, label=label, adhesive=adhesive,
+                      meta=meta)
+
+
+def analyse_inputs(inputs, args, comm, log):
+    """Analyse every step asked for (collective); returns a list of StepResult."""
+    from petgap.hdf5 import ResultFile
+    out, grids = [], {}
+    for item in inputs:
+        _root_decides(comm, lambda: _check_result_file(item.path))
+        with ResultFile.open(item.path, comm) as result:
+            if not result.complete:
+                log.warning("%s was not closed after a successful run (root attribute "
+                            "'complete' is not True); using its complete steps", item.path)
+            steps = result.steps()
+            done = set(result.completed_steps())
+            if item.step is not None:
+                if item.step not in steps:
+                    raise PostError(f"{item.path}: no step {item.step} (group "
+                                    f"'step_{item.step:04d}'); the file has steps {steps}")
+                if item.step not in done:
+                    raise PostError(f"{item.path}: step {item.step} is incomplete "
+                                    f"(interrupted run); its fields may be missing or partial")
+                chosen = [item.step]
+            else:
+                if not steps:
+                    raise PostError(f"{item.path}: no step groups ('step_0000', ...): a "
+                                    f"surface-only run (control.kind = \"none\")?")
+                skipped = [s for s in steps if s not in done]
+                if skipped:
+                    log.warning("%s: skipping incomplete step(s) %s", item.path, skipped)
+                chosen = [s for s in steps if s in done]
+            for index in chosen:
+                out.append(analyse_step(result, index, args, grids, comm, log))
+    return out
+
+
+# ------------------------------------------------------------------ outputs
+def output_paths(args):
+    """The files this run may write (Fig. 3 only if there is something to normalise)."""
+    d = args.output_dir
+    return [d / f"{TABLE_STEM}.csv", d / f"{TABLE_STEM}.json",
+            d / f"{FIG2_STEM}.{args.format}", d / f"{FIG3_STEM}.{args.format}",
+            d / f"{FIG4_STEM}.{args.format}"]
+
+
+def check_outputs(args):
+    """Rank 0: PostError if an output exists (without --overwrite) or cannot be made."""
+    d = args.output_dir
+    if d.exists() and not d.is_dir():
+        raise PostError(f"--output-dir {d} exists and is not a directory")
+    if not args.overwrite:
+        existing = [str(p) for p in output_paths(args) if p.exists()]
+        if existing:
+            raise PostError(f"refusing to overwrite existing output {', '.join(existing)}; "
+                            f"pass --overwrite or choose another --output-dir")
+    d.mkdir(parents=True, exist_ok=True)
+
+
+def _clean(value):
+    """JSON/CSV-friendly scalar: NaN and inf become None, NumPy scalars Python ones."""
+    if isinstance(value, (np.floating, float)):
+        value = float(value)
+        return value if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def write_tables(results, args, groups):
+    rows = [{k: _clean(r.row.get(k)) for k in COLUMNS} for r in results]
+    path = args.output_dir / f"{TABLE_STEM}.csv"
+    with open(path, "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=COLUMNS)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: ("" if v is None else v) for k, v in row.items()})
+    import petgap
+    doc = {
+        "petgap_version": petgap.__version__,
+        "command_line": " ".join(sys.argv),
+        "conventions": {
+            "c": "A_rep / A0, repulsive contact = zero gap and p > 0",
+            "P_rep": "marching squares, crossings from the edge asymptotics p ~ s^1/2, "
+                     "g ~ s^3/2 (petgap.analysis.perimeter)",
+            "P_pixel_edges": "raw pixel-edge length (over-counts by ~4/pi)",
+            "d_rep": "pi A_rep / P_rep (Eq. 2)", "g0": "4 h0' d_rep / 3 (Eq. 12)",
+            "collapse": "x = g/g0, y = 3 g0 (1-c) density / (2 pi c); Eq. 13: y = x^(-1/3)",
+            "power_law": "longest run of bins with local slope within 0.1 of -1/3 and y within "
+                         "a factor 2 of x^(-1/3) (petgap.analysis.fit_power_law)",
+            "cn": "fraction of A0 with 0 < g < g_c; eq14 = pi c (g_c/g0)^(2/3)",
+            "F_att": "-sum dx dy v'(g) over all pixels (< 0 attractive); F_att_noncontact: "
+                     "pixels not in repulsive contact",
+            "F_att_eq16_printed": "-(2 pi/3) w A_rep / (g0^2 rho)^(1/3), as printed",
+            "F_att_eq16_exact": "the integral of Eq. 16 exactly: Gamma(2/3) x printed",
+            "inv_kappa_att": "-F_att / (h0' E* A_rep)",
+            "kappa_rep": "A_rep h0' E* / F_rep, F_rep = repulsive (wall) force in contact",
+        },
+        "fig3_references": [{"file": ref.row["file"], "step": ref.row["step"],
+                             "c": _clean(ref.row["c"]), "g0": _clean(ref.row["g0"]),
+                             "normalised_steps": [[m.row["file"], m.row["step"]] for m in members]}
+                            for ref, members in groups],
+        "rows": rows,
+        "distributions": [{"file": r.row["file"], "step": r.row["step"],
+                           "edges": r.distribution.edges.tolist(),
+                           "counts": r.distribution.counts.tolist(),
+                           "density": [_clean(v) for v in r.distribution.density],
+                           "zero_gap_fraction": r.distribution.zero_gap_fraction,
+                           "integral": _clean(r.distribution.integral)} for r in results],
+    }
+    with open(args.output_dir / f"{TABLE_STEM}.json", "w") as fh:
+        json.dump(doc, fh, indent=1)
+        fh.write("\n")
+
+
+def _pyplot():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _power_law_line(ax, xs):
+    xs = [x for x in xs if x.size]
+    if not xs:
+        lo, hi = 1e-4, 10.0
+    else:
+        lo = min(float(x[x > 0].min()) for x in xs if np.any(x > 0))
+        hi = max(float(x.max()) for x in xs)
+    grid = np.geomspace(lo, hi, 50)
+    ax.plot(grid, grid ** (-1.0 / 3.0), "k--", lw=1.2, label="Eq. 13: $(g/g_0)^{-1/3}$",
+            zorder=5)
+
+
+def _labels(results):
+    """Legend labels: lambda_max/lambda_min where known and unique, plus file:step otherwise."""
+    labels = []
+    for r in results:
+        where = f"{Path(r.row['file']).stem}:{r.row['step']}"
+        same = sum(1 for o in results if o.label == r.label)
+        labels.append(r.label if r.label and same == 1 else
+                      f"{r.label} ({where})" if r.label else where)
+    return labels
+
+
+def figure2(results, path):
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5.5, 4.2))
+    lmins = sorted({r.meta["lambda_min_a0"] for r in results if r.meta["lambda_min_a0"]})
+    for r, label in zip(results, _labels(results)):
+        keep = r.y > 0
+        if not np.any(keep):
+            continue
+        filled = not lmins or r.meta["lambda_min_a0"] in (None, lmins[0])
+        ax.loglog(r.x[keep], r.y[keep], "o", ms=4, fillstyle="full" if filled else "none",
+                  label=label)
+    _power_law_line(ax, [r.x for r in results])
+    ax.set_xlabel("$g/g_0$")
+    ax.set_ylabel(r"$p(g)\,/\,(2\pi c / 3 g_0)$")
+    ax.set_title("Gap distribution of non-contacting points (Fig. 2)", fontsize=10)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+
+
+def figure3(groups, path):
+    """Fig. 3: each group's members normalised by its (non-adhesive) reference's c and g0."""
+    from petgap import analysis
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5.5, 4.2))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    xs, rhos, k = [], set(), 0
+    for ref, members in groups:
+        c, g0 = ref.row["c"], ref.row["g0"]
+        for r in [ref] + members:
+            d = r.distribution
+            if not d.centres.size:
+                continue
+            x, y = analysis.collapse(d, None, c, g0)
+            keep = y > 0
+            inv = r.row["inv_kappa_att"] if r.adhesive else 0.0
+            label = f"$1/\\kappa_{{att}}$ = {inv:.2g}" if inv is not None and math.isfinite(inv) \
+                else f"{Path(r.row['file']).stem}:{r.row['step']}"
+            label += f", $A_{{rep}}/A_0$ = {r.row['c']:.3g}"
+            if len(groups) > 1:
+                label += f" (ref. step {ref.row['step']})"
+            ax.loglog(x[keep], y[keep], "o" if r is ref else "s", ms=4,
+                      color=colours[k % len(colours)],
+                      fillstyle="full" if r is ref else "none", label=label)
+            k += 1
+            xs.append(x)
+            if r.meta["rho"]:
+                rhos.add(r.meta["rho"] / g0)
+    _power_law_line(ax, xs)
+    for rho in sorted(rhos):
+        ax.axvline(rho, color="0.5", ls=":", lw=1.2, label=f"$\\rho/g_0$ = {rho:.3g}")
+    ax.set_xlabel("$g/g_0$ (non-adhesive $g_0$)")
+    ax.set_ylabel(r"$p(g)\,/\,(2\pi c / 3 g_0)$ (non-adhesive $c$, $g_0$)")
+    ax.set_title("Adhesive gap distributions (Fig. 3)", fontsize=10)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+
+
+def figure4(path):
+    from petgap import analysis
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5.5, 4.2))
+    x = np.geomspace(1e-5, 1e2, 400)
+    curves = analysis.fig4_integrand(x, FIG4_RHO_OVER_G0)
+    for r, y in zip(FIG4_RHO_OVER_G0, curves):
+        ax.semilogx(x, y, label=f"$\\rho/g_0$ = {r:g}")
+    ax.set_xlabel("$g/g_0$")
+    ax.set_ylabel(r"$x\,f(x)$: share of $F_{att}$ per unit $\ln(g/g_0)$")
+    ax.set_title("Integrand of Eq. 16 (Fig. 4)", fontsize=10)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+
+
+# ---------------------------------------------------------------------- main
+class _Parser(argparse.ArgumentParser):
+    rank = 0
+
+    def _print_message(self, message, file=None):
+        if self.rank == 0:
+            super()._print_message(message, file)
+
+
+def _positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not positive")
+    return value
+
+
+def _positive_float(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"{value} is not a positive number")
+    return value
+
+
+def build_parser(rank=0):
+    _Parser.rank = rank
+    p = _Parser(prog="petgap-post",
+                description="Gap distributions, contact perimeter and adhesion (the paper's "
+                            "Eqs. 2, 12-16 and Figs. 2-4) from petgap result files. MPI-aware: "
+                            "run as mpirun -n P petgap-post ... or serially.")
+    p.add_argument("inputs", nargs="+", metavar="RUN.h5[:STEP]",
+                   help="result files; FILE:STEP (3 or step_0003) picks one step, otherwise "
+                        "all complete steps are analysed")
+    p.add_argument("-o", "--output-dir", type=Path, default=Path("."), metavar="DIR",
+                   help="where tables and figures go (created if missing; default: .)")
+    p.add_argument("--bins", type=_positive_int, default=10, metavar="N",
+                   help="logarithmic gap bins per decade (default 10)")
+    p.add_argument("--reference", type=parse_input, metavar="RUN.h5[:STEP]",
+                   help="non-adhesive step whose c and g0 normalise Fig. 3 (default step: the "
+                        "first complete one)")
+    p.add_argument("--format", choices=("png", "pdf", "svg"), default="png",
+                   help="figure file format (default png)")
+    p.add_argument("--fit-range", nargs=2, type=_positive_float, default=(0.01, 0.1),
+                   metavar=("LO", "HI"),
+                   help="x = g/g0 range of the fixed-range exponent fit (default 0.01 0.1)")
+    p.add_argument("--gap-tolerance", type=float, default=None, metavar="G",
+                   help="gaps <= G (length units) count as zero gap: contact where p > 0, "
+                        "'zero gap' (not in the histogram) elsewhere (default: 1e-6 x the "
+                        "mean gap, above the solver's round-off; 0 demands exact zeros)")
+    p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    p.add_argument("-q", "--quiet", action="store_true", help="print only warnings and errors")
+    return p
+
+
+def main(argv=None):
+    """Entry point of ``petgap-post``; returns the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    from mpi4py import MPI
+    comm = MPI.COMM_WORLD
+    parser = build_parser(comm.rank)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # same argv everywhere: every rank exits alike
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    problem = None
+    if not args.fit_range[0] < args.fit_range[1]:
+        problem = "--fit-range LO HI needs LO < HI"
+    elif args.gap_tolerance is not None and not (math.isfinite(args.gap_tolerance)
+                                                 and args.gap_tolerance >= 0):
+        problem = f"--gap-tolerance {args.gap_tolerance} must be a finite number >= 0"
+    if problem:
+        if comm.rank == 0:
+            print(f"petgap-post: error: {problem}", file=sys.stderr, flush=True)
+        return EXIT_USAGE
+    from petgap.log import configure, report_failure
+    log = configure(comm, quiet=args.quiet).getChild("post")
+    inputs = [parse_input(t) for t in args.inputs]
+    failure_comm = comm.Dup()
+    try:
+        status = _run(args, inputs, comm, log)
+    except Exception as exc:
+        return report_failure(exc, comm, failure_comm, program="petgap-post")
+    failure_comm.Free()
+    return status
+
+
+def _find_reference(results, item, comm):
+    """The already analysed step ``item`` refers to (its first step if none is named), or None."""
+    def same(a, b):
+        try:
+            return Path(a).resolve() == Path(b).resolve()
+        except OSError:
+            return False
+    matches = [r for r in results if same(r.row["file"], item.path)
+               and (item.step is None or r.row["step"] == item.step)]
+    return min(matches, key=lambda r: r.row["step"]) if matches else None
+
+
+def _usable(r):
+    c, g0 = r.row["c"], r.row["g0"]
+    return 0 < c < 1 and g0 is not None and math.isfinite(g0) and g0 > 0
+
+
+def fig3_groups(results, reference):
+    """``[(reference, [members])]`` for Fig. 3 (see the module docstring)."""
+    if reference is not None:
+        members = [r for r in results if not (r.row["file"] == reference.row["file"]
+                                              and r.row["step"] == reference.row["step"])]
+        return [(reference, members)]
+    groups = {}
+    by_key = {(r.row["file"], r.row["step"]): r for r in results}
+    for r in results:
+        ref = by_key.get((r.row["file"], r.meta["reference_step"]))
+        if r.meta["reference_step"] is not None and ref is not None and _usable(ref):
+            groups.setdefault((ref.row["file"], ref.row["step"]), (ref, []))[1].append(r)
+    return list(groups.values())
+
+
+def _run(args, inputs, comm, log):
+    _root_decides(comm, lambda: check_outputs(args))
+    results = analyse_inputs(inputs, args, comm, log)
+    if not results:
+        raise PostError("no complete step to analyse in " + ", ".join(i.text for i in inputs))
+    reference = None
+    if args.reference is not None:
+        reference = _find_reference(results, args.reference, comm)
+        if reference is None:
+            reference = analyse_inputs([args.reference], args, comm, log)[0]
+        if reference.adhesive:
+            log.warning("--reference %s is adhesive; Fig. 3 normalises by its c and g0 anyway",
+                        args.reference.text)
+        if not _usable(reference):
+            raise PostError(f"--reference {args.reference.text}: contact fraction "
+                            f"{reference.row['c']:g} gives no g0 to normalise by")
+    groups = fig3_groups(results, reference)
+    if not groups:
+        log.info("no Fig. 3: no --reference, and no adhesive step names a reference step")
+
+    def write():
+        write_tables(results, args, groups)
+        paths = [args.output_dir / f"{TABLE_STEM}.csv", args.output_dir / f"{TABLE_STEM}.json"]
+        paths.append(args.output_dir / f"{FIG2_STEM}.{args.format}")
+        figure2(results, paths[-1])
+        if groups:
+            paths.append(args.output_dir / f"{FIG3_STEM}.{args.format}")
+            figure3(groups, paths[-1])
+        paths.append(args.output_dir / f"{FIG4_STEM}.{args.format}")
+        figure4(paths[-1])
+        return [str(p) for p in paths]
+
+    written = _root_decides(comm, write)
+    log.info("wrote %s", ", ".join(written))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
