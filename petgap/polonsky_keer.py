@@ -197,11 +197,16 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             scale = 1.0
 
     contact = p > 0
-    pressure = p if load else p  # the multiplier is mean(p) under mean-gap control
-    return problem.make_solution(
-        g, pressure, contact, control, converged=converged, reason=reason,
-        solver="pcg", iterations=it, wall_time=timer(), history=history,
+    # Residuals and scalars are taken on the gap as computed; the stored field is
+    # then its projection onto the contact state found (exactly 0 in contact,
+    # >= 0 elsewhere), which differs from it by at most the reported kkt_gap h0.
+    solution = problem.make_solution(
+        g, p, contact, control, converged=converged, reason=reason,
+        solver="pcg-pressure", iterations=it, wall_time=timer(), history=history,
         operator_applications=problem.operator_applications - start_ops)
+    g[contact] = 0.0
+    np.maximum(g, 0.0, out=g)
+    return solution
 
 
 def _touching(problem, control, timer):
@@ -211,5 +216,5 @@ def _touching(problem, control, timer):
     gap = top - problem.topography
     pressure = np.zeros(grid.local_shape)
     return problem.make_solution(gap, pressure, pressure > 0, control, converged=True,
-                                 reason="zero_load", solver="pcg", iterations=0,
+                                 reason="zero_load", solver="pcg-pressure", iterations=0,
                                  operator_applications=0, wall_time=timer())
