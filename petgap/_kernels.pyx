@@ -346,13 +346,21 @@ def axpy(double[:, ::1] y, const double[:, ::1] x, double a):
 
 
 def shifted_positive_sums(const double[:, ::1] y, double mu):
-    """Returns ``(sum max(y + mu, 0), count(y + mu > 0))``: the mean-gap projection's Newton data."""
+    """Returns ``(sum max(y + mu, 0), count(y + mu > 0))`` over points off the wall.
+
+    The mean-gap projection's Newton data.  Points exactly at the wall
+    (``y == 0``: in contact and not moved by the step) stay there: the
+    projection acts on the face of the constraint set the iteration is on, so
+    that a shift never lifts the whole contact area off the wall.
+    """
     cdef Py_ssize_t i, j, m = y.shape[0], n = y.shape[1]
     cdef double v, s = 0.0
     cdef long count = 0
     with nogil:
         for i in range(m):
             for j in range(n):
+                if y[i, j] == 0.0:
+                    continue
                 v = y[i, j] + mu
                 if v > 0.0:
                     s += v
@@ -361,13 +369,15 @@ def shifted_positive_sums(const double[:, ::1] y, double mu):
 
 
 def project_and_load(double[:, ::1] g, double mu, const double[:, ::1] h, double[:, ::1] real):
-    """``g = max(g + mu, 0)`` and ``real = g + h`` (ready for ``K (g + h)``)."""
+    """``g = max(g + mu, 0)`` off the wall (``g == 0`` stays), and ``real = g + h``."""
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double v
     with nogil:
         for i in range(m):
             for j in range(n):
-                v = g[i, j] + mu
+                v = g[i, j]
+                if v != 0.0:
+                    v = v + mu
                 if v < 0.0:
                     v = 0.0
                 g[i, j] = v

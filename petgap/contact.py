@@ -215,10 +215,16 @@ class ContactProblem:
         return pair[0] / self.pressure_scale, pair[1] / self.gap_scale
 
     def make_solution(self, gap, pressure, contact, control, *, converged, reason, solver,
-                      iterations, operator_applications, wall_time, history=()):
-        """Assemble a :class:`ContactSolution` with all derived quantities."""
+                      iterations, operator_applications, wall_time, history=(), residuals=None):
+        """Assemble a :class:`ContactSolution` with all derived quantities.
+
+        ``residuals`` overrides the KKT residuals computed from ``gap`` and
+        ``pressure`` (for a solver whose stored gap is a projection of the one
+        it iterated on).
+        """
         grid = self.grid
-        kkt_p, kkt_g = self.kkt_residuals(gap, pressure, contact)
+        kkt_p, kkt_g = residuals if residuals is not None else \
+            self.kkt_residuals(gap, pressure, contact)
         interaction = self.interaction
         repulsive = contact & (pressure > 0)
         if interaction.adhesive:
@@ -242,7 +248,8 @@ class ContactProblem:
         a_rep = c * grid.area
         displacement = gap + self.topography  # up to a constant: energy ignores it
         elastic = self.half_space.energy(displacement)
-        kappa = a_rep * self.pressure_scale / repulsive_force if repulsive_force > 0 else float("nan")
+        kappa = a_rep * self.pressure_scale / repulsive_force if (repulsive_force > 0 and a_rep > 0) \
+            else float("nan")
         inv_kappa_att = (-attractive_force / (self.pressure_scale * a_rep)
                          if interaction.adhesive and a_rep > 0 else 0.0)
         return ContactSolution(

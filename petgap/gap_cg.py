@@ -55,11 +55,12 @@ def _sums(comm, *values):
 
 
 def _project_mean(grid, g, target, h, padded, comm):
-    """``g = max(g + mu, 0)`` with ``mean(g) = target``; also loads ``g + h`` into the buffer.
+    """``g = max(g + mu, 0)`` off the wall with ``mean(g) = target``; loads ``g + h`` too.
 
-    Newton on the convex, increasing, piecewise-linear ``mean(max(g + mu, 0))``
-    started to the right of the root converges monotonically in a few steps,
-    one reduction each.
+    Points exactly at the wall stay there (the projection onto the current
+    face; see :func:`petgap._kernels.shifted_positive_sums`).  Newton on the
+    convex, increasing, piecewise-linear ``mean(max(g + mu, 0))`` converges in
+    a few steps, one reduction each.
     """
     n = grid.npoints
     mu = target - grid.mean(g)

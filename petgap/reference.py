@@ -44,8 +44,8 @@ displacement of the exact pressure computed by a 2^18-point FFT (agreement to
 Hertz (axisymmetric, isolated)
 ------------------------------
 A rigid sphere of radius ``R``, ``h(r) = -r^2 / (2 R)``, pressed with force ``F``
-(Hertz, J. reine angew. Math. 92, 156 (1882); Johnson 1985, section 4.2 and
-Eq. 3.42 for the displacement outside the contact)::
+(Hertz, J. reine angew. Math. 92, 156 (1882); Johnson 1985, section 4.2, and
+section 3.4 for the displacement outside the contact)::
 
     a = (3 F R / (4 E*))^(1/3),   p0 = 3 F / (2 pi a^2) = 2 a E* / (pi R),
     p(r) = p0 sqrt(1 - r^2 / a^2),  delta = a^2 / R,
@@ -135,7 +135,7 @@ def westergaard_pressure(x, mean_pressure, amplitude, wavelength, contact_modulu
 
     References
     ----------
-    Johnson, *Contact Mechanics* (1985), Eq. 13.9 ff.
+    Johnson, *Contact Mechanics* (1985), section 13.2; Westergaard (1939).
     """
     s2, _ = _westergaard_s2(mean_pressure, amplitude, wavelength, contact_modulus)
     psi = np.pi * _wrapped(x, wavelength) / wavelength
@@ -262,20 +262,20 @@ def hertz_contact_radius(force, radius, contact_modulus):
 
     References
     ----------
-    Johnson, *Contact Mechanics* (1985), Eq. 4.22; Hertz (1882).
+    Johnson, *Contact Mechanics* (1985), section 4.2; Hertz (1882).
     """
     force, radius, contact_modulus = _check_hertz(force, radius, contact_modulus)
     return (3.0 * force * radius / (4.0 * contact_modulus)) ** (1.0 / 3.0)
 
 
 def hertz_max_pressure(force, radius, contact_modulus):
-    """Peak pressure ``p0 = 3 F / (2 pi a^2) = 2 a E* / (pi R)`` (Johnson 1985, Eq. 4.24)."""
+    """Peak pressure ``p0 = 3 F / (2 pi a^2) = 2 a E* / (pi R)`` (Johnson 1985, section 4.2)."""
     a = hertz_contact_radius(force, radius, contact_modulus)
     return 2.0 * a * contact_modulus / (math.pi * radius)
 
 
 def hertz_penetration(force, radius, contact_modulus):
-    """Penetration ``delta = a^2 / R`` from first touch (Johnson 1985, Eq. 4.23)."""
+    """Penetration ``delta = a^2 / R`` from first touch (Johnson 1985, section 4.2)."""
     a = hertz_contact_radius(force, radius, contact_modulus)
     return a * a / radius
 
@@ -303,7 +303,8 @@ def hertz_gap(r, force, radius, contact_modulus):
 
     Outside the contact ``g = r^2 / (2 R) - delta + u(r)`` with the Hertz surface
     displacement ``u(r) = (p0 / (2 a E*)) [(2 a^2 - r^2) arcsin(a / r) + a sqrt(r^2 - a^2)]``
-    (Johnson 1985, Eq. 3.42b with ``E* = E / (1 - nu^2)`` for a rigid indenter).
+    (Johnson 1985, section 3.4, with ``E* = E / (1 - nu^2)`` for a rigid indenter).  It
+    is continuous at ``r = a`` and tends to the Boussinesq ``F / (pi E* r)`` far away.
     """
     force, radius, contact_modulus = _check_hertz(force, radius, contact_modulus)
     r = np.abs(np.asarray(r, dtype=float))
