@@ -193,43 +193,48 @@ def pk_preconditioned_direction(double[:, ::1] real, const double[:, ::1] p,
 
 # ---------------------------------------------------------------------------
 # Gap-space preconditioned projected CG (petgap.gap_cg).  The gradient of the
-# energy per pixel area is ``grad = p_el + v'(g)`` with ``v'(g) = (w / rho)
-# exp(-g / rho)`` (``w = 0``: hard wall).  The free set F is ``g > 0`` or
+# energy per pixel area is ``grad = p_el + v'(g)``; ``vp`` caches ``v'(g)``
+# (computed once per iteration by :func:`gcg_interaction`; for the hard wall
+# ``adh`` is false and ``vp`` is not read).  The free set F is ``g > 0`` or
 # ``grad + lam_f < 0`` (points at the wall that are pulled off it).
 from libc.math cimport exp
 
 
-cdef inline double _grad(double pel, double g, double wr, double rho) nogil:
-    if wr != 0.0:
-        return pel + wr * exp(-g / rho)
-    return pel
+def gcg_interaction(const double[:, ::1] g, double[:, ::1] vp, double w, double rho):
+    """``vp = (w / rho) exp(-g / rho)``: the one exponential per point per iteration."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double wr = w / rho
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                vp[i, j] = wr * exp(-g[i, j] / rho)
 
 
-def gcg_open_sums(const double[:, ::1] pel, const double[:, ::1] g, double w, double rho):
+def gcg_open_sums(const double[:, ::1] pel, const double[:, ::1] g,
+                  const double[:, ::1] vp, bint adh):
     """Returns ``(sum of grad over g > 0, count of g > 0)``: the multiplier estimate."""
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double s = 0.0, wr = w / rho if w != 0.0 else 0.0
+    cdef double s = 0.0
     cdef long count = 0
     with nogil:
         for i in range(m):
             for j in range(n):
                 if g[i, j] > 0.0:
-                    s += _grad(pel[i, j], g[i, j], wr, rho)
+                    s += pel[i, j] + (vp[i, j] if adh else 0.0)
                     count += 1
     return s, count
 
 
-def gcg_free_sums(const double[:, ::1] pel, const double[:, ::1] g, double lam_f,
-                  double w, double rho):
+def gcg_free_sums(const double[:, ::1] pel, const double[:, ::1] g, const double[:, ::1] vp,
+                  bint adh, double lam_f):
     """Returns ``(sum_F grad, count_F, max_F grad, min_F grad)``."""
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double gr, s = 0.0, gmax = -INFINITY, gmin = INFINITY
-    cdef double wr = w / rho if w != 0.0 else 0.0
     cdef long count = 0
     with nogil:
         for i in range(m):
             for j in range(n):
-                gr = _grad(pel[i, j], g[i, j], wr, rho)
+                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
                 if g[i, j] > 0.0 or gr + lam_f < 0.0:
                     s += gr
                     count += 1
@@ -240,15 +245,16 @@ def gcg_free_sums(const double[:, ::1] pel, const double[:, ::1] g, double lam_f
     return s, count, gmax, gmin
 
 
-def gcg_write_residual(const double[:, ::1] pel, const double[:, ::1] g, double lam_f,
-                       double lam, double w, double rho, double[:, ::1] real):
+def gcg_write_residual(const double[:, ::1] pel, const double[:, ::1] g,
+                       const double[:, ::1] vp, bint adh, double lam_f, double lam,
+                       double[:, ::1] real):
     """``real = grad + lam`` on F, 0 elsewhere (the residual to precondition)."""
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double gr, wr = w / rho if w != 0.0 else 0.0
+    cdef double gr
     with nogil:
         for i in range(m):
             for j in range(n):
-                gr = _grad(pel[i, j], g[i, j], wr, rho)
+                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
                 if g[i, j] > 0.0 or gr + lam_f < 0.0:
                     real[i, j] = gr + lam
                 else:
@@ -256,15 +262,15 @@ def gcg_write_residual(const double[:, ::1] pel, const double[:, ::1] g, double 
 
 
 def gcg_precond_sums(const double[:, ::1] real, const double[:, ::1] pel,
-                     const double[:, ::1] g, double lam_f, double lam, double w, double rho):
+                     const double[:, ::1] g, const double[:, ::1] vp, bint adh,
+                     double lam_f, double lam):
     """Returns ``(sum_F z, sum_F r z, sum_F r)`` with ``z = real``, ``r = grad + lam``."""
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double gr, z, sz = 0.0, srz = 0.0, sr = 0.0
-    cdef double wr = w / rho if w != 0.0 else 0.0
     with nogil:
         for i in range(m):
             for j in range(n):
-                gr = _grad(pel[i, j], g[i, j], wr, rho)
+                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
                 if g[i, j] > 0.0 or gr + lam_f < 0.0:
                     z = real[i, j]
                     sz += z
@@ -274,15 +280,15 @@ def gcg_precond_sums(const double[:, ::1] real, const double[:, ::1] pel,
 
 
 def gcg_direction(double[:, ::1] real, const double[:, ::1] pel, const double[:, ::1] g,
-                  double[:, ::1] t, double lam_f, double zshift, double beta, double w,
-                  double rho):
+                  const double[:, ::1] vp, bint adh, double[:, ::1] t, double lam_f,
+                  double zshift, double beta):
     """``t = -(z - zshift) + beta t`` on F, 0 elsewhere (``z = real``); then ``real = t``."""
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double gr, v, wr = w / rho if w != 0.0 else 0.0
+    cdef double gr, v
     with nogil:
         for i in range(m):
             for j in range(n):
-                gr = _grad(pel[i, j], g[i, j], wr, rho)
+                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
                 if g[i, j] > 0.0 or gr + lam_f < 0.0:
                     v = -(real[i, j] - zshift) + beta * t[i, j]
                 else:
@@ -292,15 +298,15 @@ def gcg_direction(double[:, ::1] real, const double[:, ::1] pel, const double[:,
 
 
 def gcg_curvature(const double[:, ::1] real, const double[:, ::1] t, const double[:, ::1] pel,
-                  const double[:, ::1] g, double lam, double w, double rho):
+                  const double[:, ::1] g, const double[:, ::1] vp, bint adh, double lam,
+                  double rho):
     """Returns ``(t.K t + sum v''(g) t^2, sum (grad + lam) t, max |t|, min over t < 0 of g / -t)``.
 
-    ``real`` holds ``K t``.  The last value is the step at which the first
-    free point would reach the wall.
+    ``real`` holds ``K t``; ``v'' = -v' / rho`` for the exponential.  The last
+    value is the step at which the first free point would reach the wall.
     """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double tv, e, curv = 0.0, slope = 0.0, tmax = 0.0, reach = INFINITY
-    cdef double wr = w / rho if w != 0.0 else 0.0
     with nogil:
         for i in range(m):
             for j in range(n):
@@ -308,8 +314,8 @@ def gcg_curvature(const double[:, ::1] real, const double[:, ::1] t, const doubl
                 if tv == 0.0:
                     continue
                 curv += tv * real[i, j]
-                if wr != 0.0:
-                    e = wr * exp(-g[i, j] / rho)
+                if adh:
+                    e = vp[i, j]
                     curv -= (e / rho) * tv * tv
                     slope += (pel[i, j] + e + lam) * tv
                 else:

@@ -204,12 +204,13 @@ class ContactProblem:
             interaction stress) off contact, tension in contact -- and
             ``max violation in gap / h0`` -- gap in contact, penetration off it.
         """
-        stress = pressure
-        if self.interaction.adhesive:
-            stress = pressure + self.interaction.derivative(gap)
-        free = ~contact
-        rp = max(_max_or_zero(np.abs(stress[free])), _max_or_zero(-stress[contact]))
-        rg = max(_max_or_zero(np.abs(gap[contact])), _max_or_zero(-gap[free]))
+        rp = rg = 0.0
+        for rows in _blocks(gap.shape[0]):
+            g, p, c = gap[rows], pressure[rows], contact[rows]
+            stress = p + self.interaction.derivative(g) if self.interaction.adhesive else p
+            free = ~c
+            rp = max(rp, _max_or_zero(np.abs(stress[free])), _max_or_zero(-stress[c]))
+            rg = max(rg, _max_or_zero(np.abs(g[c])), _max_or_zero(-g[free]))
         pair = np.array([rp, rg])
         self.grid.comm.Allreduce(MPI.IN_PLACE, pair, op=MPI.MAX)
         return pair[0] / self.pressure_scale, pair[1] / self.gap_scale
@@ -226,17 +227,20 @@ class ContactProblem:
         kkt_p, kkt_g = residuals if residuals is not None else \
             self.kkt_residuals(gap, pressure, contact)
         interaction = self.interaction
-        repulsive = contact & (pressure > 0)
-        if interaction.adhesive:
-            stress = interaction.derivative(gap)          # v'(g) >= 0, tensile
-            wall = np.where(contact, pressure + stress, 0.0)
-            attractive = (~repulsive) & (gap <= interaction.range)
-            local = np.array([gap.sum(), pressure.sum(), np.count_nonzero(repulsive),
-                              interaction.energy(gap).sum(), wall.sum(), stress.sum(),
-                              np.count_nonzero(attractive)])
-        else:
-            local = np.array([gap.sum(), pressure.sum(), np.count_nonzero(repulsive), 0.0,
-                              pressure[contact].sum(), 0.0, 0.0])
+        # Sums over the slab in row blocks: no full-size temporaries at the peak.
+        local = np.zeros(7)
+        for rows in _blocks(gap.shape[0]):
+            g, p, c = gap[rows], pressure[rows], contact[rows]
+            repulsive = c & (p > 0)
+            local[:3] += (g.sum(), p.sum(), np.count_nonzero(repulsive))
+            if interaction.adhesive:
+                stress = interaction.derivative(g)          # v'(g) >= 0, tensile
+                local[3] += interaction.energy(g).sum()
+                local[4] += (p[c] + stress[c]).sum()       # wall reaction
+                local[5] += stress.sum()
+                local[6] += np.count_nonzero(~repulsive & (g <= interaction.range))
+            else:
+                local[4] += p[c].sum()
         total = np.empty_like(local)
         grid.comm.Allreduce(local, total)
         n = grid.npoints
@@ -246,8 +250,8 @@ class ContactProblem:
         # with F_att = -sum dx dy v'(g) (< 0, attractive) and F_rep the wall reaction.
         repulsive_force, attractive_force = area * total[4], -area * total[5]
         a_rep = c * grid.area
-        displacement = gap + self.topography  # up to a constant: energy ignores it
-        elastic = self.half_space.energy(displacement)
+        np.add(gap, self.topography, out=grid.real)  # u up to a constant: energy ignores it
+        elastic = self.half_space.energy(grid.real)
         kappa = a_rep * self.pressure_scale / repulsive_force if (repulsive_force > 0 and a_rep > 0) \
             else float("nan")
         inv_kappa_att = (-attractive_force / (self.pressure_scale * a_rep)
@@ -262,6 +266,12 @@ class ContactProblem:
             solver=solver, iterations=int(iterations),
             operator_applications=int(operator_applications), wall_time=float(wall_time),
             history=list(history))
+
+
+def _blocks(nrows, points=1 << 16, ncols=None):
+    """Row slices of about ``points`` values, to bound temporaries in reductions."""
+    step = max(1, points // max(ncols or 1024, 1))
+    return [slice(i, min(i + step, nrows)) for i in range(0, nrows, step)]
 
 
 def _max_or_zero(values):

@@ -35,7 +35,12 @@ the direction): two transform pairs.  ``p_el`` follows by the recurrence
 (a third pair).  Step lengths are exact minimisers of the local quadratic
 model; where the adhesive curvature makes the model non-convex along the
 direction, the step is capped at ``rho`` per point and the method restarts, and
-such steps are counted and reported.
+such steps are counted and reported.  The same cap (and restart) applies to a
+convex adhesive step longer than ``rho`` at some point: the quadratic model of
+``exp(-g / rho)`` holds only over changes of ``g`` small against ``rho``, and an
+almost vanishing curvature ``t.K t + sum v''(g) t^2`` would otherwise send the
+iterate arbitrarily far (seen: a step of 34 rho on a wavy JKR contact that
+raised the energy by 3e3 and never recovered).
 
 Convergence: the largest ``|grad + P0|`` over ``F`` relative to ``h0' E*``
 (:meth:`petgap.contact.ContactProblem.kkt_residuals`), judged on a freshly
@@ -141,6 +146,9 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
         _project_mean(grid, g, target, h, padded, comm)
     pel = np.empty(grid.local_shape)
     t = np.zeros(grid.local_shape)
+    adh = bool(interaction.adhesive)
+    # v'(g), cached once per iteration (one exponential per point); unused for the hard wall
+    vp = np.empty(grid.local_shape) if adh else pel
 
     def fresh_pressure():
         half_space.apply_in_buffer(inverse=False)
@@ -155,10 +163,12 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
     converged, reason, it = False, "max_iterations", 0
     lam_f = lam if load else 0.0
     for it in range(max_iterations + 1):
+        if adh:
+            _k.gcg_interaction(g, vp, w, rho)
         if not load:
-            s_open, n_open = _sums(comm, *_k.gcg_open_sums(pel, g, w, rho))
+            s_open, n_open = _sums(comm, *_k.gcg_open_sums(pel, g, vp, adh))
             lam_f = -s_open / n_open if n_open > 0 else 0.0
-        s_free, n_free, gmax, gmin = _k.gcg_free_sums(pel, g, lam_f, w, rho)
+        s_free, n_free, gmax, gmin = _k.gcg_free_sums(pel, g, vp, adh, lam_f)
         s_free, n_free = _sums(comm, s_free, n_free)
         ext = np.array([gmax, -gmin])
         comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
@@ -186,10 +196,10 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
             break
 
         # preconditioned residual z = P_F K^{-1} P_F r (one pair)
-        _k.gcg_write_residual(pel, g, lam_f, lam, w, rho, padded)
+        _k.gcg_write_residual(pel, g, vp, adh, lam_f, lam, padded)
         half_space.apply_in_buffer(inverse=True)
         problem.operator_applications += 1
-        sum_z, rz, sum_r = _sums(comm, *_k.gcg_precond_sums(padded, pel, g, lam_f, lam, w, rho))
+        sum_z, rz, sum_r = _sums(comm, *_k.gcg_precond_sums(padded, pel, g, vp, adh, lam_f, lam))
         if load:
             # mean mode: z += c mean(r) on F, i.e. a shift of -c sum_r / n
             zshift = -mean_mode * sum_r / n
@@ -198,13 +208,13 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
             zshift = sum_z / n_free
         beta = rz / rz_old if beta_ok else 0.0
         rz_old = rz
-        _k.gcg_direction(padded, pel, g, t, lam_f, zshift, beta, w, rho)
+        _k.gcg_direction(padded, pel, g, vp, adh, t, lam_f, zshift, beta)
 
         # curvature along t (one pair): K t lands in the buffer
         half_space.apply_in_buffer(inverse=False)
         problem.operator_applications += 1
-        curv, slope, tmax, reach = _k.gcg_curvature(padded, t, pel, g, lam if load else 0.0,
-                                                    w, rho)
+        curv, slope, tmax, reach = _k.gcg_curvature(padded, t, pel, g, vp, adh,
+                                                    lam if load else 0.0, rho)
         curv, slope = _sums(comm, curv, slope)
         tmax = comm.allreduce(tmax, op=MPI.MAX)
         if not slope < 0:
@@ -217,13 +227,16 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
                 continue
             reason = "no_descent_direction"
             break
+        capped = False
         if curv > 0:
             tau = -slope / curv
+            if w > 0 and tau * tmax > rho:  # beyond the quadratic model's reach
+                tau, capped = rho / tmax, True
         else:
             negative_curvature += 1
             tau = rho / tmax if tmax > 0 else 0.0
         negative = comm.allreduce(_k.gcg_step(g, t, tau), op=MPI.SUM)
-        if negative > 0 or curv <= 0 or since_fresh >= refresh_interval:
+        if negative > 0 or curv <= 0 or capped or since_fresh >= refresh_interval:
             # the projection acts: new free set, fresh elastic pressure, restart
             if load:
                 np.maximum(g, 0.0, out=g)
@@ -232,14 +245,15 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
                 _project_mean(grid, g, target, h, padded, comm)
             fresh_pressure()
             fresh, since_fresh = True, 0
-            beta_ok = negative == 0 and curv > 0
+            beta_ok = negative == 0 and curv > 0 and not capped
         else:
             _k.axpy(pel, padded, tau)
             fresh = False
             since_fresh += 1
             beta_ok = True
 
-    pressure = pel + lam
+    pel += lam  # the total pressure, in place (no extra full-size array)
+    pressure = pel
     contact = g <= 0
     solution = problem.make_solution(
         g, pressure, contact, control, converged=converged, reason=reason, solver="pcg-gap",
