@@ -34,24 +34,6 @@ def pk_gap(const double[:, ::1] src, const double[:, ::1] h, const double[:, ::1
     return count, s
 
 
-def pk_shift_and_norms(double[:, ::1] g, const double[:, ::1] p, double shift):
-    """``g -= shift``; returns ``(max_S |g|, max_off-S (-g), sum_S g^2)``."""
-    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double v, in_max = 0.0, pen_max = 0.0, norm = 0.0
-    with nogil:
-        for i in range(m):
-            for j in range(n):
-                v = g[i, j] - shift
-                g[i, j] = v
-                if p[i, j] > 0.0:
-                    norm += v * v
-                    if fabs(v) > in_max:
-                        in_max = fabs(v)
-                elif -v > pen_max:
-                    pen_max = -v
-    return in_max, pen_max, norm
-
-
 def pk_direction(const double[:, ::1] g, const double[:, ::1] p, double[:, ::1] t,
                  double[:, ::1] real, double beta):
     """``t = g + beta t`` on S, 0 elsewhere; the result is also copied into ``real``."""
@@ -135,11 +117,12 @@ def scale_into(double[:, ::1] p, double[:, ::1] real, double scale):
                 real[i, j] = v
 
 
-def pk_shift_norms_mask(double[:, ::1] g, const double[:, ::1] p, double shift,
-                        double[:, ::1] real):
-    """As :func:`pk_shift_and_norms`, and also ``real = g`` on S, 0 elsewhere.
+def pk_shift_and_norms(double[:, ::1] g, const double[:, ::1] p, double shift,
+                       double[:, ::1] real, bint mask):
+    """``g -= shift``; returns ``(max_S |g|, max_off-S (-g), sum_S g^2)``.
 
-    The masked gap is what the preconditioner ``P_S K P_S`` is applied to.
+    With ``mask``, also ``real = g`` on S and 0 elsewhere: the masked gap the
+    preconditioner ``P_S K P_S`` is applied to.
     """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double v, in_max = 0.0, pen_max = 0.0, norm = 0.0
@@ -150,11 +133,13 @@ def pk_shift_norms_mask(double[:, ::1] g, const double[:, ::1] p, double shift,
                 g[i, j] = v
                 if p[i, j] > 0.0:
                     norm += v * v
-                    real[i, j] = v
+                    if mask:
+                        real[i, j] = v
                     if fabs(v) > in_max:
                         in_max = fabs(v)
                 else:
-                    real[i, j] = 0.0
+                    if mask:
+                        real[i, j] = 0.0
                     if -v > pen_max:
                         pen_max = -v
     return in_max, pen_max, norm

@@ -43,6 +43,7 @@ os.environ.setdefault("H5PY_ALWAYS_USE_MPI", "1")  # before the first import of 
 import h5py  # noqa: E402
 import numpy as np  # noqa: E402
 from h5py import h5d, h5fd, h5p, h5s  # noqa: E402
+from .collective import root_decides as _root_decides  # noqa: E402
 
 __all__ = ["ResultFile", "ResultExistsError", "write_field", "read_field", "flatten_attrs",
            "step_name", "require_parallel_h5py"]
@@ -74,20 +75,6 @@ def _default_comm(comm):
         from mpi4py import MPI
         comm = MPI.COMM_WORLD
     return comm
-
-
-def _root_decides(comm, func):
-    """Run ``func`` on rank 0; return its value everywhere or raise its exception everywhere."""
-    result = None
-    if comm.rank == 0:
-        try:
-            result = ("ok", func())
-        except Exception as exc:  # re-raised on every rank below
-            result = ("error", exc)
-    status, value = comm.bcast(result, root=0)
-    if status == "error":
-        raise value
-    return value
 
 
 def check_output_path(path, comm=None, overwrite=False):

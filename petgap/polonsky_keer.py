@@ -137,10 +137,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             since_fresh += 1
         n_contact, sum_g = _sums(comm, *counts)
         shift = sum_g / n_contact if (load and n_contact > 0) else 0.0
-        if preconditioned:
-            in_max, pen_max, g_norm = _k.pk_shift_norms_mask(g, p, shift, padded)
-        else:
-            in_max, pen_max, g_norm = _k.pk_shift_and_norms(g, p, shift)
+        in_max, pen_max, g_norm = _k.pk_shift_and_norms(g, p, shift, padded, preconditioned)
         norms = np.array([in_max, pen_max])
         comm.Allreduce(MPI.IN_PLACE, norms, op=MPI.MAX)
         residual = float(norms.max()) / problem.gap_scale

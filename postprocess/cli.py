@@ -82,6 +82,7 @@ from dataclasses import dataclass, field  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from petgap.collective import root_decides as _root_decides
 
 #: Exit status of a user error.
 EXIT_USAGE = 2
@@ -163,20 +164,6 @@ def _check_result_file(path):
         if "petgap_version" not in f.attrs:
             raise PostError(f"{path}: not a petgap result file (no root attribute "
                             f"'petgap_version')")
-
-
-def _root_decides(comm, func):
-    """``func()`` on rank 0; its value, or its exception, on every rank."""
-    result = None
-    if comm.rank == 0:
-        try:
-            result = ("ok", func())
-        except Exception as exc:  # re-raised on every rank below
-            result = ("error", exc)
-    status, value = comm.bcast(result, root=0)
-    if status == "error":
-        raise value
-    return value
 
 
 # --------------------------------------------------------------- attributes
