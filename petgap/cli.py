@@ -9,6 +9,8 @@
     Validate a scene and print its resolved values.
 ``petgap schema``
     Print the scene schema as a markdown table.
+``petgap study SCENE.toml [--output-dir DIR] [--tolerances ...] [--resolutions ...] [--quick]``
+    Measure the speed/accuracy trade of a scene (see :mod:`petgap.study`).
 
 Errors: an error every rank raises (an invalid scene, an impossible
 decomposition, an existing output file, ...) is printed once, by rank 0, as
@@ -95,7 +97,7 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
     -------
     RunResult
     """
-    from .hdf5 import ResultFile, check_output_path
+    from .hdf5 import ResultFile, check_free_space, check_output_path
     from .surface import statistics as surface_statistics
     if comm is None:
         from mpi4py import MPI
@@ -123,6 +125,7 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
                   if scene.path else "", "scene_resolved": scene.to_json(),
                   "petsc_options": shlex.join(petsc_args)}
     if not resume:
+        check_free_space(output, 8 * grid.npoints * ("topography" in scene.output.fields), comm)
         with ResultFile.create(output, comm, overwrite=overwrite, provenance=provenance) as result:
             attrs = {"statistics": stats} if scene.output.statistics else None
             if "topography" in scene.output.fields:
@@ -198,7 +201,7 @@ def _run_steps(scene, grid, topography, stats, output, petsc_args, log, resume):
     """
     from .contact import ContactProblem, MeanGap
     from .elastic import ElasticHalfSpace
-    from .hdf5 import ResultFile
+    from .hdf5 import ResultFile, check_free_space
     from .interaction import ExponentialAdhesion, check_resolution
     from .solver import annotate_step, solve
 
@@ -259,6 +262,8 @@ def _run_steps(scene, grid, topography, stats, output, petsc_args, log, resume):
                  "surface": {"rms_height": stats.rms_height, "rms_slope": stats.rms_slope,
                              "rms_curvature": stats.rms_curvature},
                  "pixel_size": [grid.dx, grid.dy]}
+        # a full disk is a clean error before the file is touched (see petgap.hdf5)
+        check_free_space(output, 8 * grid.npoints * len(set(fields) - {"topography"}), comm)
         with _hold_sigterm(), ResultFile.open_for_append(output, comm) as result:
             group = result.begin_step(step.index, attrs=attrs)
             if "gap" in fields:
@@ -432,6 +437,9 @@ def build_parser(rank=0):
 
     schema = sub.add_parser("schema", help="print the scene schema as a markdown table")
     schema.set_defaults(func=_cmd_schema, quiet=False)
+
+    from .study import add_parser as add_study_parser
+    add_study_parser(sub)
     return parser
 
 

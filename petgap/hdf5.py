@@ -32,6 +32,7 @@ names the problem if h5py came in serial anyway.
 """
 import dataclasses
 import datetime
+import errno
 import os
 import shlex
 import socket
@@ -45,14 +46,24 @@ import numpy as np  # noqa: E402
 from h5py import h5d, h5fd, h5p, h5s  # noqa: E402
 from .collective import root_decides as _root_decides  # noqa: E402
 
-__all__ = ["ResultFile", "ResultExistsError", "write_field", "read_field", "flatten_attrs",
-           "step_name", "require_parallel_h5py"]
+__all__ = ["ResultFile", "ResultExistsError", "ResultWriteError", "write_field", "read_field",
+           "flatten_attrs", "step_name", "require_parallel_h5py", "check_free_space"]
 
 STEP_PREFIX = "step_"
 
 
 class ResultExistsError(FileExistsError):
     """The result file exists and overwriting was not asked for."""
+
+
+class ResultWriteError(OSError):
+    """A write into a result file failed inside HDF5 (see :meth:`ResultFile.__exit__`).
+
+    The file is left open and must not be touched again by this process, not even
+    by the implicit close at interpreter shutdown: ``abort_job`` tells
+    :func:`petgap.log.report_failure` to end the job with ``MPI_Abort``.
+    """
+    abort_job = True
 
 
 def require_parallel_h5py():
@@ -81,23 +92,56 @@ def check_output_path(path, comm=None, overwrite=False):
     """Raise the same error on every rank if ``path`` cannot be created as a result file.
 
     :class:`ResultExistsError` if it exists and ``overwrite`` is false,
-    FileNotFoundError if its directory does not exist.  Cheap; callers use it
-    to fail before spending time on a run.
+    FileNotFoundError if its directory does not exist, PermissionError if the
+    directory is not writable (read-only file system, permissions).  Cheap;
+    callers use it to fail before spending time on a run.
     """
     comm = _default_comm(comm)
     path = Path(path)
 
     def check():
+        if path.is_dir():  # before the existence test, whose message would call it a file
+            raise IsADirectoryError(f"output path {path} is a directory; give a file name")
         if path.exists() and not overwrite:
             raise ResultExistsError(
                 f"refusing to overwrite the existing result file {path}; "
                 f"pass --overwrite to replace it, or choose another --output")
-        if path.is_dir():
-            raise IsADirectoryError(f"output path {path} is a directory")
         parent = path.parent if str(path.parent) else Path(".")
         if not parent.is_dir():
             raise FileNotFoundError(f"cannot create result file {path}: "
                                     f"directory {parent} does not exist")
+        if not os.access(parent, os.W_OK | os.X_OK):  # EROFS counts, even for root
+            raise PermissionError(f"cannot create result file {path}: directory {parent} "
+                                  f"is not writable (read-only file system or permissions)")
+    _root_decides(comm, check)
+
+
+#: Bytes a write must leave free beyond its raw data, for HDF5 metadata (object
+#: headers, attributes, B-trees: about 10 KiB per step) with ample slack.
+FREE_SPACE_MARGIN = 1 << 20
+
+
+def check_free_space(path, nbytes, comm=None):
+    """Raise the same OSError (ENOSPC) on every rank unless ``nbytes`` more fit next to ``path``.
+
+    A write that runs out of space inside HDF5 cannot be undone: see
+    :meth:`ResultFile.__exit__`.  Checking first (the raw data plus
+    :data:`FREE_SPACE_MARGIN`) turns a full disk into a clean error before the
+    file is touched, so every step already written stays readable and the run
+    can be continued once there is room.
+    """
+    comm = _default_comm(comm)
+    path = Path(path)
+
+    def check():
+        parent = path.parent if str(path.parent) else Path(".")
+        stat = os.statvfs(parent)
+        free, need = stat.f_bavail * stat.f_frsize, int(nbytes) + FREE_SPACE_MARGIN
+        if free < need:
+            raise OSError(errno.ENOSPC, f"not enough free space to write to {path}: the next "
+                          f"write needs about {need} bytes ({int(nbytes)} of data and "
+                          f"{FREE_SPACE_MARGIN} kept for metadata), the file system has {free} "
+                          f"bytes free; make room, then rerun the same command to continue")
     _root_decides(comm, check)
 
 
@@ -464,12 +508,30 @@ class ResultFile:
             return False
         from .log import failed_everywhere
         if self.file is not None and failed_everywhere(self._failure_comm):
+            if self.writable and isinstance(exc, OSError):
+                # An I/O error inside HDF5 (a full disk, a failing file system).  Closing
+                # would flush metadata pointing at data that never reached the disk, so
+                # that the whole file, complete steps included, no longer opens
+                # ("truncated file"), and h5py 3.7's close loops forever on the object
+                # whose write failed.  Leave the file as its last flush made it (every
+                # complete step readable), keep the handle away from the collector, and
+                # let the caller end the process without closing it (ResultWriteError).
+                _ABANDONED.append(self.file)
+                self.file = None
+                raise ResultWriteError(
+                    f"writing {self.path} failed: {exc}; the file is left as its last complete "
+                    f"step made it: rerun the same command to continue once the cause (a full "
+                    f"disk?) is fixed") from exc
             self.close(complete=False)
         return False
 
     def __repr__(self):
         state = "closed" if self.file is None else ("writable" if self.writable else "read-only")
         return f"ResultFile({str(self.path)!r}, {state}, ranks={self.comm.size})"
+
+
+#: Files left open after a failed write (see :meth:`ResultFile.__exit__`).
+_ABANDONED = []
 
 
 def _check_is_result(path):

@@ -179,6 +179,10 @@ def report_failure(exc, comm, failure_comm, clean_types=(ValueError, OSError),
       traceback; returns 2 on every rank.
     * Raised on every rank, any other type: rank 0 prints the traceback;
       returns 1.
+    * Raised on every rank with ``exc.abort_job`` true (a failed write into an
+      HDF5 file, :class:`petgap.hdf5.ResultWriteError`): reported as above,
+      then ``comm.Abort(2)``, so that nothing -- not even the interpreter's
+      shutdown -- closes the damaged file.
     * Raised on some ranks only: this rank prints its traceback, prefixed with
       its rank, and calls ``comm.Abort(1)`` (the other ranks may never return
       from a collective).
@@ -193,6 +197,9 @@ def report_failure(exc, comm, failure_comm, clean_types=(ValueError, OSError),
                 text = "".join(traceback.format_exception(exc))
                 print(f"{text}{program}: internal error: {type(exc).__name__}: {exc}",
                       file=stream, flush=True)
+        if getattr(exc, "abort_job", False):
+            failure_comm.Barrier()  # rank 0 has printed
+            comm.Abort(2)
         return 2 if isinstance(exc, clean_types) else 1
     text = "".join(traceback.format_exception(exc))
     print(f"{text}{program}: error on rank {comm.rank} of {comm.size} only "

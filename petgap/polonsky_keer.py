@@ -156,11 +156,14 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             break
         if it >= max_iterations:
             break
-        if n_contact == 0:
-            # Mean-gap control with no contact yet: seed it where surfaces overlap.
-            np.maximum(-g, 0.0, out=p)
-            p *= problem.pressure_scale / problem.gap_scale
-            delta, scale, fresh = 0.0, 1.0, True
+        if n_contact == 0 or (load and n_contact == 1):
+            # Mean-gap control with no contact yet, or load control on a single
+            # contact point (e.g. warm-started from a one-pixel contact), where no
+            # direction has zero mean over S and the step would break down: let the
+            # points where the surfaces overlap into S; `scale` restores the load.
+            p += np.maximum(-g, 0.0) * (problem.pressure_scale / problem.gap_scale)
+            scale = target * n / _sums(comm, p.sum())[0] if load else 1.0
+            delta, fresh = 0.0, True
             continue
         if preconditioned:
             # z = P_S K P_S g (one pair), made zero-mean on S under load control
