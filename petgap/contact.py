@@ -254,8 +254,10 @@ class ContactProblem:
         elastic = self.half_space.energy(grid.real)
         kappa = a_rep * self.pressure_scale / repulsive_force if (repulsive_force > 0 and a_rep > 0) \
             else float("nan")
-        inv_kappa_att = (-attractive_force / (self.pressure_scale * a_rep)
-                         if interaction.adhesive and a_rep > 0 else 0.0)
+        # undefined (NaN, as kappa_rep) when attraction acts without repulsive contact
+        inv_kappa_att = (0.0 if not interaction.adhesive else
+                         -attractive_force / (self.pressure_scale * a_rep) if a_rep > 0
+                         else float("nan"))
         return ContactSolution(
             gap=gap, pressure=pressure, control=control, mean_gap=mean_gap,
             mean_pressure=mean_pressure, contact_fraction=c, elastic_energy=elastic,

@@ -130,6 +130,8 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
                          f"tensile load")
     start_ops = problem.operator_applications
     mean_mode = problem.gap_scale / problem.pressure_scale  # c of the module docstring
+    if not load and target == 0.0:
+        return _full_contact(problem, control, timer)
 
     g = np.empty(grid.local_shape)
     if initial_gap is not None:
@@ -260,4 +262,22 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
         iterations=it, operator_applications=problem.operator_applications - start_ops,
         wall_time=timer(), history=history)
     solution.negative_curvature_steps = negative_curvature
+    return solution
+
+
+def _full_contact(problem, control, timer):
+    """Mean gap 0: the only feasible gap is ``g = 0``; no iteration can improve on it.
+
+    The mean pressure is then any ``P0`` that leaves no wall reaction tensile,
+    ``p_el + P0 + v'(0) >= 0`` with ``p_el = K h``; the least such ``P0`` (the
+    load that just closes the last gap) is reported.
+    """
+    grid = problem.grid
+    gap = np.zeros(grid.local_shape)
+    p_el = problem.elastic_pressure(gap)
+    wall = problem.interaction.derivative(0.0) if problem.interaction.adhesive else 0.0
+    least = -grid.comm.allreduce(float(np.min(p_el)) + wall, op=MPI.MIN)
+    solution = problem.make_solution(
+        gap, p_el + least, gap <= 0, control, converged=True, reason="full_contact",
+        solver="pcg-gap", iterations=0, operator_applications=1, wall_time=timer())
     return solution

@@ -89,7 +89,10 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
     tolerance : float
         Unit-free KKT tolerance.
     max_iterations : int
-        Per TAO solve (``-tao_max_it`` overrides).
+        Iteration limit of the whole solve, summed over the inner solves of the
+        outer loops (adhesive load control, mean-gap control with TAO
+        built-ins), so that a sweep step never costs more (``-tao_max_it``
+        overrides it for each TAO solve).
     initial : petgap.contact.ContactSolution, optional
         Warm start: the previous state of a sweep.
     options : dict, optional
@@ -328,8 +331,13 @@ def _solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance, max_ite
         else 0.01 * problem.pressure_scale
     points = []
     solution = initial
+    exhausted = False
     for outer in range(max_outer):
-        solution = _tao_solve(problem, Load(pressure), tao_type, tolerance_inner, max_iterations,
+        budget = max_iterations - iterations  # the limit is per step, not per inner solve
+        if budget < 1:
+            exhausted = True
+            break
+        solution = _tao_solve(problem, Load(pressure), tao_type, tolerance_inner, budget,
                               solution, options, monitor)
         iterations += solution.iterations
         error = (solution.mean_gap - target) / h0
@@ -349,9 +357,10 @@ def _solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance, max_ite
                 slope = -0.5 * h0
             log_p = l2 + (target - g2) / slope
         pressure = math.exp(min(max(log_p, points[-1][0] - 5.0), points[-1][0] + 5.0))
-    converged = solution.converged and abs((solution.mean_gap - target) / h0) <= tolerance
-    reason = "converged_kkt" if converged else (solution.reason if not solution.converged
-                                                else "multiplier_not_converged")
+    converged = not exhausted and solution.converged and \
+        abs((solution.mean_gap - target) / h0) <= tolerance
+    reason = "converged_kkt" if converged else "max_iterations" if exhausted else \
+        (solution.reason if not solution.converged else "multiplier_not_converged")
     result = problem.make_solution(
         solution.gap, solution.pressure, solution.gap <= 0, control, converged=converged,
         reason=reason, solver=f"{tao_type}+multiplier", iterations=iterations,
@@ -369,6 +378,13 @@ def _solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial
     adhesive interface need not be monotone; the branch found is the one
     connected to the starting gap (the previous step of a sweep, else the
     non-adhesive solution at the same load), and is reported in ``history``.
+    Every trial is warm-started from the last state on that branch; a trial in
+    which every contact has let go of the wall is not followed (adhesion is
+    hysteretic: a separated warm start never finds the contact again) but
+    bisected back towards the branch, down to ``1e-3 h0`` of mean gap: if the
+    branch ends there without carrying the load, that is pull-off, and the
+    separated state is returned with ``converged=False``.  Full contact
+    (``g_bar = 0``) carries every load that leaves no wall reaction tensile.
     """
     from .contact import ContactProblem
     timer = Timer()
@@ -390,15 +406,46 @@ def _solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial
         gap_guess, state = seed.mean_gap, seed
     points, history = [], []
     lo = hi = None  # brackets: (gap, P - P0) with opposite signs
-    solution = state
+    solution = on_branch = state
+    negative_curvature = 0
+
+    def touching(s):
+        return problem.grid.comm.allreduce(int(np.count_nonzero(s.gap <= 0))) > 0
+    guard = touching(state)
+    release = None  # smallest mean gap tried at which every contact let go
+    exhausted = False
     for outer in range(max_outer):
+        budget = max_iterations - iterations  # the limit is per step, seed included
+        if budget < 1:
+            exhausted = True  # (the state is then a trial or the hard-wall seed)
+            break
         solution = _tao_solve(problem, MeanGap(max(gap_guess, 0.0)), "pcg-gap", tolerance,
-                              max_iterations, solution, options, monitor)
+                              budget, on_branch, options, monitor)
         iterations += solution.iterations
+        negative_curvature += solution.negative_curvature_steps
         f = solution.mean_pressure - target
         history.append((solution.mean_gap, solution.mean_pressure))
         if not solution.converged or abs(f) <= tolerance * problem.pressure_scale:
             break
+        if solution.mean_gap == 0.0:
+            # Full contact (every gap at the wall): the mean gap cannot resolve the
+            # load any further, and this state carries every P0 at which no wall
+            # reaction is tensile, p_el + P0 + v'(0) >= 0 (adhesive jump-in).
+            p_el = solution.pressure - solution.mean_pressure
+            least = -problem.grid.comm.allreduce(
+                float(np.min(p_el + problem.interaction.derivative(0.0))), op=MPI.MIN)
+            if target >= least:
+                solution.pressure = p_el + target
+                solution.mean_pressure = problem.grid.mean(solution.pressure)
+                break
+        if guard and not touching(solution):
+            # off the branch (overshoot, or past its end): bisect back towards it
+            release = solution.mean_gap if release is None else min(release, solution.mean_gap)
+            if release - on_branch.mean_gap <= 1e-3 * h0:
+                break  # pull-off: the branch ends without carrying the load
+            gap_guess = 0.5 * (on_branch.mean_gap + release)
+            continue
+        on_branch = solution
         points.append((solution.mean_gap, f))
         if f > 0:
             lo = (solution.mean_gap, f) if lo is None or solution.mean_gap > lo[0] else lo
@@ -415,15 +462,19 @@ def _solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial
         if lo is not None and hi is not None and not (min(lo[0], hi[0]) < gap_guess < max(lo[0], hi[0])):
             # regula falsi inside the bracket
             gap_guess = lo[0] - lo[1] * (hi[0] - lo[0]) / (hi[1] - lo[1])
-    converged = solution.converged and abs(solution.mean_pressure - target) <= \
-        tolerance * problem.pressure_scale
-    reason = "converged_kkt" if converged else (solution.reason if not solution.converged
-                                                else "load_not_reached")
-    return problem.make_solution(
+        if release is not None:
+            gap_guess = min(gap_guess, 0.5 * (solution.mean_gap + release))
+    converged = not exhausted and solution.converged and \
+        abs(solution.mean_pressure - target) <= tolerance * problem.pressure_scale
+    reason = "converged_kkt" if converged else "max_iterations" if exhausted else \
+        (solution.reason if not solution.converged else "load_not_reached")
+    result = problem.make_solution(
         solution.gap, solution.pressure, solution.gap <= 0, control, converged=converged,
         reason=reason, solver="pcg-gap+mean-gap-secant", iterations=iterations,
         operator_applications=problem.operator_applications - start_ops, wall_time=timer(),
         history=history)
+    result.negative_curvature_steps = negative_curvature  # of all inner solves
+    return result
 
 
 class GapHessian:
