@@ -249,11 +249,14 @@ class SurfaceSource:
     Nyquist modes cannot be resampled exactly).
     """
 
-    def __init__(self, scene, comm, log):
+    def __init__(self, scene, comm, log, band=True):
         from .cli import make_grid, make_surface
         self.scene = scene
         self.shape = scene.grid.shape
         self.band, self.reason = None, None
+        if not band:
+            self.reason = "not asked for"
+            return
         if scene.surface.kind != "self-affine":
             self.reason = (f"surface.kind = {json.dumps(scene.surface.kind)}: a measured "
                            f"topography has no lambda_min, and resampling it would change it; "
@@ -550,12 +553,14 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
             solutions = [geometry]
     sums = np.array([memory.increase, memory.peak], dtype=float)
     comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+    times = np.array([sum(s.wall_time for s in solutions), setup])
+    comm.Allreduce(MPI.IN_PLACE, times, op=MPI.MAX)  # the slowest rank: the same row everywhere
     row.update(
         converged=all(s.converged for s in solutions),
         reason=";".join(s.reason for s in solutions),
         iterations=sum(s.iterations for s in solutions),
         fft_pairs=sum(s.operator_applications for s in solutions),
-        wall_time=sum(s.wall_time for s in solutions), setup_time=setup,
+        wall_time=float(times[0]), setup_time=float(times[1]),
         bytes_per_point=sums[0] / grid.npoints, peak_rss_mib=sums[1] / 2 ** 20,
         memory_method=memory.method,
         kkt_pressure=max(s.kkt_pressure for s in solutions),
@@ -596,7 +601,7 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
     log.info("%s: %d x %d, a0 = %.4g: %s, %d iterations, %d FFT pairs, %.2f s (+%.2f s setup), "
              "%.0f B/point; c = %.6g, d_rep = %.6g", what, rung.nx, rung.ny, rung.a0,
              "converged" if row["converged"] else "NOT converged", row["iterations"],
-             row["fft_pairs"], row["wall_time"], setup, row["bytes_per_point"], c,
+             row["fft_pairs"], row["wall_time"], row["setup_time"], row["bytes_per_point"], c,
              stats.mean_diameter)
     del grid, heights, hard, sticky, solutions, geometry, force_state, gap, pressure
     gc.collect()
@@ -632,7 +637,7 @@ def run_study(scene, comm=None, *, tolerances=DEFAULT_TOLERANCES, resolutions=DE
     check_scene(scene)
     quantities = quantities_of(scene)
     notes = []
-    source = SurfaceSource(scene, comm, log)
+    source = SurfaceSource(scene, comm, log, band="resolution" in ladders)
     if source.band is None and "resolution" in ladders:
         notes.append(f"resolution ladder not run: {source.reason}")
         log.warning("resolution ladder not run: %s", source.reason)
@@ -787,7 +792,8 @@ def write_outputs(study, output_dir, argv=None):
            "conventions": {
                "error": "|q - q_ref| / |q_ref| against the ladder's reference rung (the most "
                         "accurate converged one)",
-               "wall_time": "solver wall time, s (summed over the solves of a rung)",
+               "wall_time": "solver wall time, s (slowest rank; summed over the solves of a "
+                            "rung)",
                "setup_time": "grid (FFT planning), surface and problem, s",
                "fft_pairs": "elastic operator applications (one forward + one inverse FFT each)",
                "bytes_per_point": "peak resident memory of grid + surface + problem + solve "

@@ -90,7 +90,7 @@ statistics = false
 def test_default_scene_file_is_valid(comm):
     scene = Scene.from_file(ROOT / "runs" / "default.toml", comm)
     assert scene.grid.shape == (512, 512)
-    assert scene.surface.lambda_min == 16.0 and scene.surface.lambda_max == 256.0
+    assert scene.surface.lambda_min == 32.0 and scene.surface.lambda_max == 256.0
     assert scene.control.kind == "load" and scene.control.values == (0.0015,)
     assert scene.path.endswith("default.toml")
 
