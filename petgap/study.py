@@ -69,6 +69,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .argtypes import number_in, positive_float
+
 #: Solver tolerances of the tolerance ladder (loosest first).
 DEFAULT_TOLERANCES = (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 #: ``lambda_min / a0`` of the resolution ladder.
@@ -915,25 +917,9 @@ def format_table(study):
 
 
 # ========================================================================== CLI
-def _tolerance(text):
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (math.isfinite(value) and 0 < value <= 0.1):
-        raise argparse.ArgumentTypeError(f"{text} is not a tolerance in (0, 0.1]")
-    return value
-
-
-def _resolution(text):
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (math.isfinite(value) and 2 < value <= 1e6):
-        raise argparse.ArgumentTypeError(f"{text} is not a lambda_min / a0 above 2 (the band "
-                                         f"must lie inside the Nyquist modes)")
-    return value
+_tolerance = number_in(0.0, 0.1, what="a tolerance in (0, 0.1]")
+_resolution = number_in(2.0, 1e6, what="a lambda_min / a0 above 2 (the band must lie inside "
+                                       "the Nyquist modes)")
 
 
 def _points(text):
@@ -952,16 +938,6 @@ def _points(text):
                                          f"4096^2 or 4096x4096)") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text} is not a positive number of points")
-    return value
-
-
-def _positive(text):
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"{text} is not a positive number")
     return value
 
 
@@ -991,7 +967,7 @@ def add_parser(subparsers):
     p.add_argument("--max-points", type=_points, default=DEFAULT_MAX_POINTS, metavar="N",
                    help="skip resolution rungs with more grid points (default 4096^2; "
                         "accepts 16777216, 4096^2 or 4096x4096)")
-    p.add_argument("--fit-range", type=_positive, nargs=2, default=DEFAULT_FIT_RANGE,
+    p.add_argument("--fit-range", type=positive_float, nargs=2, default=DEFAULT_FIT_RANGE,
                    metavar=("LO", "HI"),
                    help="x = g/g0 range of the common power-law fit (default 0.001 0.1, "
                         "where the paper finds Eq. 13)")

@@ -82,6 +82,7 @@ from dataclasses import dataclass, field  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from petgap.argtypes import positive_float, positive_int  # noqa: E402
 from petgap.collective import root_decides as _root_decides
 
 #: Exit status of a user error.
@@ -610,26 +611,6 @@ class _Parser(argparse.ArgumentParser):
             super()._print_message(message, file)
 
 
-def _positive_int(text):
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} is not positive")
-    return value
-
-
-def _positive_float(text):
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"{value} is not a positive number")
-    return value
-
-
 def build_parser(rank=0):
     _Parser.rank = rank
     p = _Parser(prog="petgap-post",
@@ -641,14 +622,14 @@ def build_parser(rank=0):
                         "all complete steps are analysed")
     p.add_argument("-o", "--output-dir", type=Path, default=Path("."), metavar="DIR",
                    help="where tables and figures go (created if missing; default: .)")
-    p.add_argument("--bins", type=_positive_int, default=10, metavar="N",
+    p.add_argument("--bins", type=positive_int, default=10, metavar="N",
                    help="logarithmic gap bins per decade (default 10)")
     p.add_argument("--reference", type=parse_input, metavar="RUN.h5[:STEP]",
                    help="non-adhesive step whose c and g0 normalise Fig. 3 (default step: the "
                         "first complete one)")
     p.add_argument("--format", choices=("png", "pdf", "svg"), default="png",
                    help="figure file format (default png)")
-    p.add_argument("--fit-range", nargs=2, type=_positive_float, default=(0.01, 0.1),
+    p.add_argument("--fit-range", nargs=2, type=positive_float, default=(0.01, 0.1),
                    metavar=("LO", "HI"),
                    help="x = g/g0 range of the fixed-range exponent fit (default 0.01 0.1)")
     p.add_argument("--gap-tolerance", type=float, default=None, metavar="G",

@@ -66,6 +66,14 @@ def mpi_tmp_path():
         shutil.rmtree(path, ignore_errors=True)
 
 
+def write_shared(comm, path, text):
+    """Write ``text`` to ``path`` on rank 0; every rank returns ``path`` once it exists."""
+    if comm.rank == 0:
+        path.write_text(text)
+    comm.Barrier()
+    return path
+
+
 def wait_for_root(func, comm=COMM, poll=0.02):
     """Run ``func()`` on rank 0 while other ranks sleep-poll; return its result everywhere.
 

@@ -7,6 +7,7 @@ import numpy as np
 from petgap.hdf5 import read_attrs
 
 import h5py  # after petgap.hdf5, which selects the MPI build  # noqa: E402
+from conftest import write_shared as write
 
 SCENE = """
 [grid]
@@ -26,13 +27,6 @@ values = [0.002]
 [solver]
 planner = "estimate"
 """
-
-
-def write(comm, path, text):
-    if comm.rank == 0:
-        path.write_text(text)
-    comm.Barrier()
-    return path
 
 
 def inspect(comm, path):

@@ -23,6 +23,7 @@ from petgap.solver import solve
 from petgap.surface import self_affine, statistics
 
 import h5py  # after petgap.hdf5, which selects the MPI build  # noqa: E402
+from conftest import write_shared as write
 
 E_STAR = 2.5  # not 1: a misplaced E* must show
 TOL = 1e-9
@@ -100,13 +101,6 @@ def assert_same_state(problem, a, b, tol=TOL):
     assert gmax(grid, np.abs(a.gap - b.gap)) <= gap_tol
     assert gmax(grid, np.abs(a.pressure - b.pressure)) <= p_tol
     assert abs(a.mean_gap - b.mean_gap) <= gap_tol
-
-
-def write(comm, path, text):
-    if comm.rank == 0:
-        path.write_text(text)
-    comm.Barrier()
-    return path
 
 
 def read_steps(comm, path):

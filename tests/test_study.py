@@ -14,6 +14,7 @@ from petgap import study
 from petgap.grid import Grid
 from petgap.scene import Scene
 from petgap.surface import self_affine, statistics
+from conftest import write_shared as write
 
 SIZE = (24.0, 30.0)      # non-square pixels on the source grid: dx = 0.5, dy = 0.75
 LAMBDA_MIN = 4.0         # band: |m| <= 6, n <= 7
@@ -216,13 +217,6 @@ values = [0.005]
 [solver]
 planner = "estimate"
 """
-
-
-def write(comm, path, text):
-    if comm.rank == 0:
-        path.write_text(text)
-    comm.Barrier()
-    return path
 
 
 def test_cli_quick_writes_table_and_figure(comm, mpi_tmp_path, run_cli):
