@@ -34,6 +34,13 @@ point enters), ``K^{-1} p`` follows ``p`` by the conjugate-gradient recurrence
 transform is forced every 50 such steps and before any verdict, so round-off
 cannot accumulate into the answer.
 
+The contact set is stored as sorted index lists, with the pressure and the
+conjugate direction kept on it only (``petgap/_contact_set.pyx``): at a few
+percent contact an iteration then streams the slab through memory once (the
+gap pass) besides the transforms, instead of half a dozen times.  The
+displacement ``u = K^{-1} p`` is the one full field kept between iterations;
+the gap ``g = u - h + d`` is recomputed where it is needed.
+
 Convergence is judged at the start of an iteration, on the pair ``(p, g)`` the
 iteration starts from, by the gap residual of
 :meth:`petgap.contact.ContactProblem.kkt_residuals` (the pressure residual is
@@ -42,8 +49,12 @@ zero by construction: ``p >= 0`` and ``p = 0`` off ``S``).
 import numpy as np
 from mpi4py import MPI
 
-from . import _kernels as _k
+from . import _contact_set as _cs
 from .contact import Load, MeanGap, Timer
+
+
+_EMPTY = np.empty(0)
+_EMPTY_INDEX = np.empty(0, dtype=np.int64)
 
 
 def _sums(comm, *values):
@@ -114,30 +125,49 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             p[...] = target
     offset = problem.mean_height + target if not load else 0.0
 
-    t = np.zeros(grid.local_shape)
-    g = np.empty(grid.local_shape)
-    u = np.empty(grid.local_shape)
+    # The contact set S = {p > 0} as sorted index lists, with p and the
+    # conjugate direction t stored on S only (see petgap/_contact_set.pyx).
+    mask = np.ascontiguousarray(p > 0, dtype=np.uint8)
     padded = grid._padded
+    padded_width = padded.shape[1]
+    idx, pidx, pS, tS = _cs.merge(_EMPTY_INDEX, _EMPTY, _EMPTY, np.flatnonzero(mask),
+                                  p.ravel()[mask.ravel() > 0], np.zeros_like(mask), padded_width)
+    mask[...] = 0
+    mask.ravel()[idx] = 1
+    del p
+    gS, zS = np.empty_like(pS), np.empty_like(pS)
+    overlap = np.empty(max(1024, n // (100 * comm.size)), dtype=np.int64)
+    u = np.empty(grid.local_shape)
     half_space = problem.half_space
     scale, fresh = 1.0, True
     since_fresh = 0
-    delta, g_old = 0.0, 1.0
+    delta, g_old, shift = 0.0, 1.0, 0.0
     history = []
     converged, reason, it = False, "max_iterations", 0
     for it in range(max_iterations + 1):
+        if len(gS) != len(pS):
+            gS, zS = np.empty_like(pS), np.empty_like(pS)
         if fresh:
             # u = K^{-1} p from scratch: one transform pair
-            _k.scale_into(p, padded, scale)
+            if scale != 1.0:
+                pS *= scale
+                scale = 1.0
+            _cs.fill(padded, pidx, pS, 1.0)
             half_space.apply_in_buffer(inverse=True)
             problem.operator_applications += 1
-            counts = _k.pk_gap(padded, h, p, g, u, offset, True)
+            src, sidx = padded, pidx
             since_fresh = 0
         else:
-            counts = _k.pk_gap(u, h, p, g, u, offset, False)
+            src, sidx = u, idx
             since_fresh += 1
-        n_contact, sum_g = _sums(comm, *counts)
+        n_contact, sum_g = _sums(comm, len(idx), _cs.gather_gap(src, sidx, h, idx, offset, gS))
         shift = sum_g / n_contact if (load and n_contact > 0) else 0.0
-        in_max, pen_max, g_norm = _k.pk_shift_and_norms(g, p, shift, padded, preconditioned)
+        in_max, g_norm = _cs.shift_and_norms(gS, shift)
+        pen_max, n_over = _cs.gap_pass(src, h, mask, u, fresh, offset - shift, padded,
+                                       preconditioned, overlap)
+        if n_over > len(overlap):
+            overlap = np.empty(2 * n_over, dtype=np.int64)
+            _cs.collect_overlap(u, h, mask, offset - shift, overlap)
         norms = np.array([in_max, pen_max])
         comm.Allreduce(MPI.IN_PLACE, norms, op=MPI.MAX)
         residual = float(norms.max()) / problem.gap_scale
@@ -161,45 +191,63 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # contact point (e.g. warm-started from a one-pixel contact), where no
             # direction has zero mean over S and the step would break down: let the
             # points where the surfaces overlap into S; `scale` restores the load.
-            p += np.maximum(-g, 0.0) * (problem.pressure_scale / problem.gap_scale)
-            scale = target * n / _sums(comm, p.sum())[0] if load else 1.0
+            g = u - h + (offset - shift)
+            g.ravel()[idx] = 0.0
+            points = np.flatnonzero(g < 0)
+            extra = -g.ravel()[points] * (problem.pressure_scale / problem.gap_scale)
+            idx, pidx, pS, tS = _cs.merge(idx, pS, tS, points, extra, mask, padded_width)
+            del g
+            scale = target * n / _sums(comm, pS.sum())[0] if load else 1.0
             delta, fresh = 0.0, True
             continue
         if preconditioned:
-            # z = P_S K P_S g (one pair), made zero-mean on S under load control
+            # z = P_S K P_S g (one pair; gap_pass left P_S g in the buffer),
+            # made zero-mean on S under load control
             half_space.apply_in_buffer(inverse=False)
             problem.operator_applications += 1
-            sum_z, g_norm = _sums(comm, *_k.pk_preconditioned_sums(padded, g, p))
+            sum_z, g_norm = _sums(comm, *_cs.gather_sums(padded, pidx, gS, zS))
             zshift = sum_z / n_contact if load else 0.0
-            _k.pk_preconditioned_direction(padded, p, t, zshift, delta * g_norm / g_old)
+            _cs.direction(zS, zshift, delta * g_norm / g_old, tS)
         else:
             g_norm = _sums(comm, g_norm)[0]
-            _k.pk_direction(g, p, t, padded, delta * g_norm / g_old)
+            _cs.direction(gS, 0.0, delta * g_norm / g_old, tS)
         g_old = g_norm
         # The image r = K^{-1} t of the direction: one transform pair
+        _cs.fill(padded, pidx, tS, 1.0)
         half_space.apply_in_buffer(inverse=True)
         problem.operator_applications += 1
-        sum_r, sum_gt, sum_rt, sum_t = _sums(comm, *_k.pk_step_sums(padded, g, t, p))
+        sum_r, sum_gt, sum_rt, sum_t = _sums(comm, *_cs.step_sums(padded, pidx, gS, tS))
         if load:
             sum_rt -= sum_r / n_contact * sum_t  # r minus its mean over S
-            shift_r = sum_r / n_contact
         if not sum_rt > 0:
             reason = "breakdown"
             break
         tau = sum_gt / sum_rt
-        n_overlap, n_clipped, sum_p = _sums(comm, *_k.pk_update(p, t, g, tau))
+        entering, clipped, sum_p = _cs.update(pS, tS, gS, tau)
+        added = overlap[:min(n_over, len(overlap))]
+        added_p = np.empty(len(added))
+        sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau, added_p)
+        n_overlap, n_clipped, sum_p = _sums(comm, entering + len(added), clipped, sum_p)
         delta = 0.0 if n_overlap > 0 else 1.0
         scale = target * n / sum_p if load else 1.0
+        if clipped or len(added):
+            idx, pidx, pS, tS = _cs.merge(idx, pS, tS, added, added_p, mask, padded_width)
         # Same contact set, no projection: u follows p linearly, no transform needed.
         fresh = n_overlap > 0 or n_clipped > 0 or since_fresh >= refresh_interval
         if not fresh:
-            _k.pk_recurrence(u, p, padded, tau, scale)
+            _cs.recurrence(u, padded, tau, scale)
+            pS *= scale
             scale = 1.0
 
-    contact = p > 0
     # Residuals are taken on the gap as computed; the stored field (and the
     # scalars derived from it) is its projection onto the contact state found:
     # exactly 0 in contact, >= 0 elsewhere, within the reported kkt_gap h0.
+    g = u
+    g -= h
+    g += offset - shift
+    p = np.zeros(grid.local_shape)
+    p.ravel()[idx] = pS
+    contact = mask.astype(bool)
     residuals = problem.kkt_residuals(g, p, contact)
     g[contact] = 0.0
     np.maximum(g, 0.0, out=g)

@@ -554,3 +554,50 @@ def test_iteration_limit_is_not_success(comm, solver, control):
     assert not sol.converged
     assert sol.reason and not sol.reason.startswith("converged") and sol.reason != "success"
     assert sol.kkt_pressure > 1e-10 or sol.kkt_gap > 1e-10
+
+
+def test_contact_set_merge_and_overlap_collection():
+    """The index-list kernels of the pressure solver (petgap/_contact_set.pyx).
+
+    The merged contact set must stay sorted, disjoint and consistent with the
+    mask; points whose pressure dropped to zero leave it, added points enter with
+    a zero direction; and an overlap buffer too small for the penetrating points
+    must report their true number so that the caller can collect them all.
+    """
+    from petgap import _contact_set as cs
+
+    rng = np.random.default_rng(3)
+    m, n, width = 7, 9, 12
+    mask = (rng.random((m, n)) < 0.4).astype(np.uint8)
+    idx = np.flatnonzero(mask)
+    pS = rng.random(len(idx)) - 0.3          # about 30 % leave the set
+    tS = rng.standard_normal(len(idx))
+    off = np.flatnonzero(mask == 0)
+    added = np.sort(rng.choice(off, size=5, replace=False))
+    added_p = np.array([0.5, 0.1, -0.2, 0.3, 0.7])  # the negative one stays out
+    new_idx, new_pidx, new_p, new_t = cs.merge(idx, pS, tS, added, added_p, mask, width)
+
+    keep = pS > 0
+    expected = np.sort(np.concatenate([idx[keep], added[added_p > 0]]))
+    np.testing.assert_array_equal(new_idx, expected)
+    np.testing.assert_array_equal(np.flatnonzero(mask), expected)
+    np.testing.assert_array_equal(new_pidx, (expected // n) * width + expected % n)
+    lookup = dict(zip(idx[keep], zip(pS[keep], tS[keep])))
+    lookup.update({a: (q, 0.0) for a, q in zip(added, added_p) if q > 0})
+    np.testing.assert_array_equal(new_p, [lookup[k][0] for k in expected])
+    np.testing.assert_array_equal(new_t, [lookup[k][1] for k in expected])
+
+    # Overlap points: off the set with u - h + offset < 0.
+    u = rng.standard_normal((m, n))
+    h = np.zeros((m, n))
+    pad = np.empty((m, width))
+    small = np.empty(2, dtype=np.int64)
+    pen, count = cs.gap_pass(u, h, mask, np.empty((m, n)), False, 0.0, pad, True, small)
+    truth = np.flatnonzero((u < 0) & (mask == 0))
+    assert count == len(truth) > 2
+    assert pen == pytest.approx(-u[(u < 0) & (mask == 0)].min())
+    np.testing.assert_array_equal(small, truth[:2])
+    np.testing.assert_array_equal(pad[:, :n], np.where(mask > 0, u, 0.0))
+    big = np.empty(count, dtype=np.int64)
+    assert cs.collect_overlap(u, h, mask, 0.0, big) == count
+    np.testing.assert_array_equal(big, truth)

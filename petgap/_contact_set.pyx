@@ -1,0 +1,291 @@
+# cython: language_level=3
+"""Kernels of the pressure-based solver on a contact set stored as an index list.
+
+At the contact fractions of rough contact (a few percent), most of what a
+Polonsky-Keer iteration does concerns the contact set ``S`` only: the pressure,
+the conjugate direction and the gap are zero or irrelevant elsewhere.  Storing
+them densely makes each iteration stream half a dozen full slabs through
+memory, which at 1024^2 costs about as much as a third FFT pair and evicts the
+FFT buffers from the cache.  Here ``S`` is kept as sorted index lists and the
+quantities on it as compressed vectors, so that an iteration makes a single
+full pass over the slab (:func:`gap_pass`) besides filling the FFT buffer.
+
+Index conventions: ``idx`` holds flat indices into this rank's unpadded
+``(nx_local, ny)`` slabs (topography, displacement, contact mask), ``pidx`` the
+matching flat indices into the padded FFT buffer ``(nx_local, 2 (ny // 2 + 1))``.
+Both are sorted ascending, so gathers and scatters walk memory forwards.
+
+Every function works on this rank's data only and returns partial sums or
+extrema for the caller to reduce over MPI.
+"""
+import numpy as np
+
+from libc.string cimport memset
+
+
+def fill(double[:, ::1] pad, const long[::1] pidx, const double[::1] values, double scale):
+    """``pad = scale * values`` on S and 0 elsewhere: the FFT input ``P_S x``."""
+    cdef Py_ssize_t k, ns = pidx.shape[0]
+    cdef double *flat
+    if pad.shape[0] == 0:
+        return
+    flat = &pad[0, 0]
+    with nogil:
+        memset(flat, 0, pad.shape[0] * pad.shape[1] * sizeof(double))
+        for k in range(ns):
+            flat[pidx[k]] = scale * values[k]
+
+
+def gather_gap(const double[:, ::1] src, const long[::1] sidx, const double[:, ::1] h,
+               const long[::1] idx, double offset, double[::1] gS):
+    """``gS = src - h + offset`` on S (``src`` indexed by ``sidx``); returns ``sum gS``."""
+    cdef Py_ssize_t k, ns = idx.shape[0]
+    cdef double v, s = 0.0
+    cdef const double *sf
+    cdef const double *hf
+    if ns == 0:
+        return 0.0
+    sf = &src[0, 0]
+    hf = &h[0, 0]
+    with nogil:
+        for k in range(ns):
+            v = sf[sidx[k]] - hf[idx[k]] + offset
+            gS[k] = v
+            s += v
+    return s
+
+
+def shift_and_norms(double[::1] gS, double shift):
+    """``gS -= shift``; returns ``(max |gS|, sum gS^2)``: the in-contact gap residual."""
+    cdef Py_ssize_t k, ns = gS.shape[0]
+    cdef double v, a, in_max = 0.0, norm = 0.0
+    with nogil:
+        for k in range(ns):
+            v = gS[k] - shift
+            gS[k] = v
+            norm += v * v
+            a = v if v >= 0.0 else -v
+            if not a <= in_max:   # also lets a NaN through
+                in_max = a
+    return in_max, norm
+
+
+def gap_pass(const double[:, ::1] src, const double[:, ::1] h, const unsigned char[:, ::1] mask,
+             double[:, ::1] u, bint store, double offset, double[:, ::1] pad, bint masked_gap,
+             long[::1] overlap):
+    """The one full pass of an iteration, over the gap ``g = src - h + offset``.
+
+    * ``u = src`` if ``store`` (``src`` is then the FFT buffer holding ``K^{-1} p``);
+    * ``pad = g`` on S and 0 elsewhere if ``masked_gap`` (the input of the
+      preconditioner ``P_S K P_S g``; ``pad`` may be ``src``);
+    * the largest penetration ``max(-g)`` off S, and the flat indices of the
+      points off S with ``g < 0`` written to ``overlap`` (as many as fit).
+
+    Returns ``(penetration, number of overlap points)``; when the number
+    exceeds ``len(overlap)`` the caller grows the buffer and calls
+    :func:`collect_overlap`.
+    """
+    cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1], cap = overlap.shape[0]
+    cdef Py_ssize_t count = 0
+    cdef double v, s, pen = 0.0
+    cdef const double *sr
+    cdef const double *hr
+    cdef const unsigned char *mr
+    cdef double *ur
+    cdef double *pr
+    with nogil:
+        for i in range(m):
+            sr = &src[i, 0]
+            hr = &h[i, 0]
+            mr = &mask[i, 0]
+            ur = &u[i, 0]
+            pr = &pad[i, 0]
+            for j in range(n):
+                s = sr[j]
+                v = s - hr[j] + offset
+                if store:
+                    ur[j] = s
+                if mr[j]:
+                    if masked_gap:
+                        pr[j] = v
+                else:
+                    if masked_gap:
+                        pr[j] = 0.0
+                    if v < 0.0:
+                        if count < cap:
+                            overlap[count] = i * n + j
+                        count += 1
+                        if -v > pen:
+                            pen = -v
+                    elif v != v:
+                        pen = v   # NaN: reported, never hidden
+    return pen, count
+
+
+def collect_overlap(const double[:, ::1] u, const double[:, ::1] h,
+                    const unsigned char[:, ::1] mask, double offset, long[::1] overlap):
+    """Flat indices of the points off S with ``u - h + offset < 0``; returns their number."""
+    cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1], cap = overlap.shape[0]
+    cdef Py_ssize_t count = 0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                if not mask[i, j] and u[i, j] - h[i, j] + offset < 0.0:
+                    if count < cap:
+                        overlap[count] = i * n + j
+                    count += 1
+    return count
+
+
+def gather_sums(const double[:, ::1] pad, const long[::1] pidx, const double[::1] gS,
+                double[::1] zS):
+    """``zS = pad`` on S; returns ``(sum zS, sum gS zS)``."""
+    cdef Py_ssize_t k, ns = pidx.shape[0]
+    cdef double z, sz = 0.0, sgz = 0.0
+    cdef const double *pf
+    if ns == 0:
+        return 0.0, 0.0
+    pf = &pad[0, 0]
+    with nogil:
+        for k in range(ns):
+            z = pf[pidx[k]]
+            zS[k] = z
+            sz += z
+            sgz += gS[k] * z
+    return sz, sgz
+
+
+def direction(const double[::1] zS, double zshift, double beta, double[::1] tS):
+    """``tS = (zS - zshift) + beta tS``: the conjugate direction on S."""
+    cdef Py_ssize_t k, ns = tS.shape[0]
+    with nogil:
+        for k in range(ns):
+            tS[k] = zS[k] - zshift + beta * tS[k]
+
+
+def step_sums(const double[:, ::1] pad, const long[::1] pidx, const double[::1] gS,
+              const double[::1] tS):
+    """Returns ``(sum r, sum g t, sum r t, sum t)`` over S with ``r = pad = K^{-1} P_S t``."""
+    cdef Py_ssize_t k, ns = pidx.shape[0]
+    cdef double r, t, sr = 0.0, sgt = 0.0, srt = 0.0, st = 0.0
+    cdef const double *pf
+    if ns == 0:
+        return 0.0, 0.0, 0.0, 0.0
+    pf = &pad[0, 0]
+    with nogil:
+        for k in range(ns):
+            r = pf[pidx[k]]
+            t = tS[k]
+            sr += r
+            sgt += gS[k] * t
+            srt += r * t
+            st += t
+    return sr, sgt, srt, st
+
+
+def update(double[::1] pS, const double[::1] tS, const double[::1] gS, double tau):
+    """``pS = max(pS - tau tS, 0)``, or ``-tau gS`` where that is <= 0 and ``gS < 0``.
+
+    Returns ``(points of S re-entering by overlap, points of S clipped, sum pS)``.
+    """
+    cdef Py_ssize_t k, ns = pS.shape[0]
+    cdef double v, total = 0.0
+    cdef long clipped = 0, overlap = 0
+    with nogil:
+        for k in range(ns):
+            v = pS[k] - tau * tS[k]
+            if v <= 0.0:
+                clipped += 1
+                v = 0.0
+                if gS[k] < 0.0:
+                    v = -tau * gS[k]
+                    overlap += 1
+            pS[k] = v
+            total += v
+    return overlap, clipped, total
+
+
+def overlap_pressures(const double[:, ::1] u, const double[:, ::1] h, const long[::1] points,
+                      double offset, double tau, double[::1] out):
+    """``out = -tau g`` at the overlap points off S, ``g = u - h + offset``; returns the sum."""
+    cdef Py_ssize_t k, np_ = points.shape[0]
+    cdef double v, s = 0.0
+    cdef const double *uf
+    cdef const double *hf
+    if np_ == 0:
+        return 0.0
+    uf = &u[0, 0]
+    hf = &h[0, 0]
+    with nogil:
+        for k in range(np_):
+            v = -tau * (uf[points[k]] - hf[points[k]] + offset)
+            out[k] = v
+            s += v
+    return s
+
+
+def merge(const long[::1] idx, const double[::1] pS, const double[::1] tS,
+          const long[::1] added, const double[::1] added_p, unsigned char[:, ::1] mask,
+          Py_ssize_t padded_width):
+    """The new contact set: points of S with ``pS > 0`` merged with the added points.
+
+    ``added`` (sorted, disjoint from S) enter with pressure ``added_p`` and a zero
+    direction.  ``mask`` is updated in place.  Returns ``(idx, pidx, pS, tS)``.
+    """
+    cdef Py_ssize_t ns = idx.shape[0], na = added.shape[0]
+    cdef Py_ssize_t n = mask.shape[1], a = 0, k = 0, out = 0, kept = 0
+    cdef unsigned char *mf
+    for k in range(ns):
+        if pS[k] > 0.0:
+            kept += 1
+    for k in range(na):
+        if added_p[k] > 0.0:
+            kept += 1
+    new_idx = np.empty(kept, dtype=np.int64)
+    new_pidx = np.empty(kept, dtype=np.int64)
+    new_p = np.empty(kept, dtype=float)
+    new_t = np.empty(kept, dtype=float)
+    cdef long[::1] ni = new_idx, npi = new_pidx
+    cdef double[::1] npv = new_p, ntv = new_t
+    cdef long point
+    if mask.shape[0] == 0:
+        return new_idx, new_pidx, new_p, new_t
+    mf = &mask[0, 0]
+    with nogil:
+        k = 0
+        while k < ns or a < na:
+            if a >= na or (k < ns and idx[k] < added[a]):
+                point = idx[k]
+                if pS[k] > 0.0:
+                    ni[out] = point
+                    npv[out] = pS[k]
+                    ntv[out] = tS[k]
+                    out += 1
+                else:
+                    mf[point] = 0
+                k += 1
+            else:
+                point = added[a]
+                if added_p[a] > 0.0:
+                    ni[out] = point
+                    npv[out] = added_p[a]
+                    ntv[out] = 0.0
+                    mf[point] = 1
+                    out += 1
+                a += 1
+        for k in range(out):
+            npi[k] = ni[k] + (ni[k] // n) * (padded_width - n)
+    return new_idx, new_pidx, new_p, new_t
+
+
+def recurrence(double[:, ::1] u, const double[:, ::1] pad, double tau, double scale):
+    """``u = scale (u - tau r)`` with ``r = pad``: the displacement of the updated pressure."""
+    cdef Py_ssize_t i, j, m = u.shape[0], n = u.shape[1]
+    cdef double *ur
+    cdef const double *rr
+    with nogil:
+        for i in range(m):
+            ur = &u[i, 0]
+            rr = &pad[i, 0]
+            for j in range(n):
+                ur[j] = scale * (ur[j] - tau * rr[j])
