@@ -43,7 +43,8 @@ from mpi4py import MPI
 
 __all__ = ["contact_mask", "resolve_gap_tolerance", "GAP_ROUND_OFF", "perimeter",
            "crossing_fraction", "contact_statistics",
-           "gap_distribution", "collapse", "fit_power_law", "near_contact_area",
+           "gap_distribution", "collapse", "fit_power_law", "resolved_gap", "auto_fit_range",
+           "FitRange", "near_contact_area",
            "near_contact_area_eq14", "attractive_force_measured", "attractive_force_eq16",
            "inverse_kappa_att", "fig4_integrand", "PerimeterResult", "ContactStatistics",
            "GapDistribution", "PowerLawFit", "NearContactArea", "AttractiveForce",
@@ -1078,6 +1079,241 @@ def fit_power_law(x, y, *, expected=-1.0 / 3.0, amplitude=1.0, slope_tolerance=0
     slope, icept = np.polyfit(lx[a:b], ly[a:b], 1)
     return PowerLawFit(float(slope), float(np.exp(icept)), float(x[a]), float(x[b - 1]),
                        float(math.log10(x[b - 1] / x[a])), int(b - a), int(a), int(b))
+
+
+# ============================================================ fit range (Eq. 13)
+#: Defaults of :func:`auto_fit_range`, the data-driven range of petgap-post's exponent fit.
+#: Lower bound: this many times the smallest resolved gap (:func:`resolved_gap`).  In the
+#: runs of ``docs/fig2.md`` the local slope of ``p(g)`` settles only at 2-3 times it.
+FIT_RESOLUTION_FACTOR = 3.0
+#: Upper bound in ``x = g / g0``: Eq. 13 is a small-gap law; above ``~0.1 g0`` the
+#: far-from-contact (Gaussian) part of ``p(g)`` takes over (paper, section 5).
+FIT_X_MAX = 0.1
+#: Largest deviation of a local log-log slope from the range's median slope (beyond noise).
+FIT_SLOPE_BAND = 0.05
+#: Local slopes are fitted over the bins within this many decades either side.
+FIT_SLOPE_WINDOW = 0.25
+#: Narrowest range searched, in decades of ``x`` (unless the bounds leave less).
+FIT_MIN_DECADES = 0.5
+#: Bins with fewer pixels (Poisson noise above 30 %) are not used.
+FIT_MIN_COUNT = 10
+#: Statistical allowance: a local slope may deviate by this many of its standard errors
+#: (from the bins' Poisson counts) beyond ``FIT_SLOPE_BAND``.
+FIT_SIGMAS = 2.0
+
+
+def resolved_gap(mean_diameter, pixel):
+    """The smallest gap the grid resolves next to a contact edge, in units of ``g0``.
+
+    By Eq. 12 the gap at lateral distance ``s`` from an edge is
+    ``g0 (s / d_rep)^(3/2)``; the first pixel outside an edge lies on average half a
+    pixel from it, so gaps below ``x_res = (pixel / (2 d_rep))^(3/2)`` (in ``g / g0``)
+    are not resolved: there ``p(g)`` levels off instead of following Eq. 13 (the
+    paper's roll-off, "inversely proportional to the resolution").
+
+    Parameters
+    ----------
+    mean_diameter : float
+        ``d_rep`` (Eq. 2).
+    pixel : float
+        Pixel size (the larger of ``dx``, ``dy`` for non-square pixels).
+    """
+    return (_positive("pixel", pixel) / (2.0 * _positive("mean_diameter", mean_diameter))) ** 1.5
+
+
+@dataclass(frozen=True)
+class FitRange:
+    """The range of ``x = g / g0`` chosen by :func:`auto_fit_range`.
+
+    Attributes
+    ----------
+    x_min, x_max : float
+        First and last bin centre of the range (NaN if none was found).
+    bound_min, bound_max : float
+        The bounds searched: ``resolution_factor x_res`` and ``x_max``.
+    slope_deviation : float
+        Largest deviation of a local log-log slope in the range from their median.
+    slope_error : float
+        Largest standard error of those local slopes, from the bins' Poisson
+        counts (0 without counts).
+    npoints : int
+        Bins in the range.
+    start, stop : int
+        Index range of the bins in the input arrays (``stop`` exclusive).
+    qualified : bool
+        Whether the range meets the criterion of :func:`auto_fit_range` (False: the
+        flattest range of the minimum width was taken instead, or there was none).
+    reason : str
+        How the range was chosen, or why there is none.
+    """
+
+    x_min: float
+    x_max: float
+    bound_min: float
+    bound_max: float
+    slope_deviation: float
+    slope_error: float
+    npoints: int
+    start: int
+    stop: int
+    qualified: bool
+    reason: str
+
+
+def _local_slopes(t, v, weights, half_width):
+    """Least-squares slope of ``v`` on ``t`` over the points within ``half_width`` of each
+    point, and its standard error (weights: inverse variances of ``v``; None: no error)."""
+    n = t.size
+    slopes, errors = np.full(n, np.nan), np.zeros(n)
+    for k in range(n):
+        sel = np.abs(t - t[k]) <= half_width * (1 + 1e-9)
+        if np.count_nonzero(sel) < 2:
+            continue
+        w = np.ones(np.count_nonzero(sel)) if weights is None else weights[sel]
+        tt, vv = t[sel], v[sel]
+        tm = np.sum(w * tt) / np.sum(w)
+        sxx = np.sum(w * (tt - tm) ** 2)
+        slopes[k] = np.sum(w * (tt - tm) * vv) / sxx
+        errors[k] = 0.0 if weights is None else 1.0 / math.sqrt(sxx)
+    return slopes, errors
+
+
+def auto_fit_range(x, y, counts=None, *, x_resolution, resolution_factor=FIT_RESOLUTION_FACTOR,
+                   x_max=FIT_X_MAX, slope_band=FIT_SLOPE_BAND, slope_window=FIT_SLOPE_WINDOW,
+                   min_decades=FIT_MIN_DECADES, min_count=FIT_MIN_COUNT, sigmas=FIT_SIGMAS):
+    """The range of ``x`` where the local slope of ``log y`` against ``log x`` is constant.
+
+    The default range of petgap-post's exponent fit (Eq. 13).  No exponent is
+    assumed (unlike :func:`fit_power_law`'s own window, which looks for ``-1/3``),
+    so a fit over this range tests the exponent rather than confirming it.
+
+    Rule
+    ----
+    1. *Bounds*: ``resolution_factor * x_resolution <= x <= x_max``.  Below a few
+       times the smallest resolved gap (:func:`resolved_gap`) ``p(g)`` rolls off
+       to a constant; above ``~0.1 g0`` the far-from-contact part of ``p(g)``
+       takes over.  Only bins with positive ``y`` and, when ``counts`` are given,
+       at least ``min_count`` pixels are used: the longest run (in decades) of
+       consecutive such bins inside the bounds.
+    2. *Local slopes*: at each bin of the run, the least-squares slope of
+       ``log y`` on ``log x`` over the bins of the run within ``slope_window``
+       decades either side, weighted by the counts (the Poisson variance of
+       ``log y`` is ``1 / count``), with its standard error ``sigma_k``.
+    3. *Choice*: a window of consecutive bins *qualifies* if the median of its
+       local slopes is negative -- ``p(g)`` falls with ``g`` near contact edges,
+       while the far-from-contact part rises towards its Gaussian peak -- and
+       every local slope in it lies within ``slope_band + sigmas * sigma_k`` of
+       that median: the slope is constant to ``+-slope_band`` beyond noise.  Of
+       the qualifying windows spanning at least ``min_decades`` (or the whole
+       run, if it is shorter) the widest is taken (ties: the smaller largest
+       deviation).  If none qualifies, the flattest of the narrowest windows
+       with a negative median slope is taken, with ``qualified = False``.
+
+    On exact data the range ends about two bins inside a sharp change of slope
+    (the local slopes there mix both sides); with noisy data the allowance
+    ``sigmas * sigma_k`` lets it reach further where the change is within the
+    noise.
+
+    Parameters
+    ----------
+    x, y : array_like
+        Collapsed data (:func:`collapse`): ``x = g / g0`` ascending.
+    counts : array_like, optional
+        Pixels per bin (``GapDistribution.counts``); without them every bin
+        counts equally and no noise allowance is made.
+    x_resolution : float
+        Smallest resolved gap over ``g0`` (:func:`resolved_gap`).
+    resolution_factor, x_max, slope_band, slope_window, min_decades, min_count, sigmas
+        See the rule; defaults: the ``FIT_*`` constants of this module.
+
+    Returns
+    -------
+    FitRange
+    """
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if x.shape != y.shape or x.ndim != 1:
+        raise ValueError(f"x and y must be 1D arrays of one length, got {x.shape} and {y.shape}")
+    if counts is not None:
+        counts = np.asarray(counts, dtype=float)
+        if counts.shape != x.shape:
+            raise ValueError(f"counts has shape {counts.shape}, x {x.shape}")
+    bound_min = float(resolution_factor) * _positive("x_resolution", x_resolution)
+    bound_max = _positive("x_max", x_max)
+
+    def nothing(reason):
+        return FitRange(math.nan, math.nan, bound_min, bound_max, math.nan, math.nan, 0, 0, 0,
+                        False, reason)
+
+    if not bound_min < bound_max:
+        return nothing(f"no range: the resolution bound {bound_min:.3g} g0 "
+                       f"({resolution_factor:g} x the smallest resolved gap) is not below "
+                       f"{bound_max:g} g0")
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(x) & np.isfinite(y) & (x > 0) & (y > 0)
+        if counts is not None:
+            ok &= counts >= min_count
+        ok &= (x >= bound_min) & (x <= bound_max)
+    # the longest run (in decades) of consecutive usable bins inside the bounds
+    run = None
+    k, n = 0, x.size
+    while k < n:
+        if not ok[k]:
+            k += 1
+            continue
+        m = k
+        while m + 1 < n and ok[m + 1]:
+            m += 1
+        key = (math.log10(x[m] / x[k]), m - k)
+        if run is None or key > run[0]:
+            run = (key, k, m + 1)
+        k = m + 1
+    if run is None or run[2] - run[1] < 3:
+        return nothing(f"no range: fewer than 3 bins with at least {min_count} pixels between "
+                       f"{bound_min:.3g} and {bound_max:g} g0")
+    _, r0, r1 = run
+    decades = np.log10(x[r0:r1])
+    weights = None if counts is None else counts[r0:r1]
+    t = np.log(x[r0:r1])
+    # at least the neighbouring bins, however coarse the bins
+    half = max(float(slope_window) * math.log(10.0), float(np.max(np.diff(t))) * (1 + 1e-6))
+    slopes, errors = _local_slopes(t, np.log(y[r0:r1]), weights, half)
+    m = r1 - r0
+    need = min(float(min_decades), decades[-1] - decades[0]) - 1e-9
+    allowed = slope_band + sigmas * errors
+    qualified, fallback = None, None
+    for a in range(m - 2):
+        for b in range(a + 3, m + 1):        # window a .. b - 1 of the run, at least 3 bins
+            span = decades[b - 1] - decades[a]
+            if span < need:
+                continue
+            s, e = slopes[a:b], allowed[a:b]
+            middle = float(np.median(s))
+            deviation = np.abs(s - middle)
+            worst = float(np.max(deviation))
+            if not middle < 0:                # p(g) rising with g: the far-from-contact part
+                continue
+            if np.all(deviation <= e):
+                key = (span, -worst)
+                if qualified is None or key > qualified[0]:
+                    qualified = (key, a, b, worst)
+            key = (-(b - a), -float(np.max(deviation - (e - slope_band))))
+            if fallback is None or key > fallback[0]:
+                fallback = (key, a, b, worst)
+    if qualified is not None:
+        _, a, b, worst = qualified
+        reason = (f"widest range in {bound_min:.3g} .. {bound_max:g} g0 whose local slope stays "
+                  f"within {slope_band:g} (+ {sigmas:g} sigma) of its median")
+    elif fallback is None:
+        return nothing(f"no range: p(g) does not decrease with g anywhere in {bound_min:.3g} .. "
+                       f"{bound_max:g} g0")
+    else:
+        _, a, b, worst = fallback
+        reason = (f"no range in {bound_min:.3g} .. {bound_max:g} g0 has a local slope constant "
+                  f"to {slope_band:g}: the flattest {decades[b - 1] - decades[a]:.2g} decades")
+    return FitRange(float(x[r0 + a]), float(x[r0 + b - 1]), bound_min, bound_max, worst,
+                    float(np.max(errors[a:b])), b - a, r0 + a, r0 + b,
+                    qualified is not None, reason)
 
 
 # ========================================================= near-contact area

@@ -15,25 +15,58 @@ and analysed with :mod:`petgap.analysis`; rank 0 writes into ``DIR``:
     One row per file/step: contact fraction ``c``, ``A_rep``, ``P_rep`` (and the raw
     pixel-edge length), ``d_rep`` (Eq. 2), ``g0`` (Eq. 12), the fitted exponent and
     power-law range of the collapsed gap distribution (Eq. 13;
-    :func:`petgap.analysis.fit_power_law`) and the exponent over the fixed
-    ``--fit-range``, the near-contact area ``c_n`` at ``g_c = g0``, ``0.18 g0`` and
+    :func:`petgap.analysis.fit_power_law`, a window that looks for ``-1/3``), the
+    exponent over the *fit range* (``exponent_fit_range``; see below), the
+    near-contact area ``c_n`` at ``g_c = g0``, ``0.18 g0`` and
     ``1e-3 g0`` against Eq. 14, for adhesive runs ``F_att`` measured (Eq. 15, all
     pixels, and its non-contact part) against Eq. 16 as printed and exact
     (``Gamma(2/3)`` times larger), ``1/kappa_att`` from each, and ``kappa_rep``
     (``A_rep h0' E* / F_rep`` with ``F_rep`` the wall reaction ``sum (p + v'(0))``
-    over contact pixels).  The JSON file also holds the conventions and each
-    step's histogram.  Missing values are empty in the CSV and ``null`` in the JSON.
+    over contact pixels).  The JSON file also holds the conventions, the fit-range
+    settings, the Fig. 3 references (with the steps each normalises and the
+    duplicates drawn through it), the legend label of every series drawn in
+    Figs. 2 and 3 (``legends``), and each step's histogram.  Missing values are
+    empty in the CSV and ``null`` in the JSON.
+
+    *Fit range.*  With ``--fit-range LO HI`` the exponent is fitted over exactly
+    ``LO <= g/g0 <= HI`` for every step.  By default the range is chosen per step
+    from its own data (:func:`petgap.analysis.auto_fit_range`): between
+    ``3 x_res`` and ``0.1``, where ``x_res = (a0 / (2 d_rep))^(3/2)`` is the gap
+    half a pixel from a contact edge by Eq. 12 over ``g0`` (the smallest resolved
+    gap; below a few times it ``p(g)`` rolls off), the widest range of at least
+    half a decade where ``p(g)`` falls with ``g`` and the local log-log slope
+    (least squares over +-0.25 decade) stays within 0.05 of its median, beyond 2
+    standard errors of the bin counts; if none qualifies, the flattest
+    half-decade, with a warning.  No exponent is assumed.  A fixed range such as
+    the former default 0.01-0.1 lies above the power law at workstation sizes
+    (512^2-2048^2, ``lambda_min = 32 a0``; ``docs/fig2.md``).  Columns:
+    ``resolved_gap_over_g0``, ``fit_range_source`` (``auto`` or ``--fit-range``),
+    ``fit_range_x_min``, ``fit_range_x_max`` (bin centres for ``auto``),
+    ``fit_range_bins``, ``fit_range_qualified`` and ``fit_range_slope_deviation``
+    (``auto`` only), ``exponent_fit_range``.
 
 ``fig2-gap-distribution.FMT``
     Fig. 2: collapsed ``p(g)`` against ``g / g0`` (log-log), one series per
-    file/step, with the dashed ``(g/g0)^(-1/3)`` line of Eq. 13.
+    file/step, with the dashed ``(g/g0)^(-1/3)`` line of Eq. 13.  Each legend
+    label states ``lambda_min`` (in ``a0``), and ``lambda_max / lambda_min`` and
+    ``L / lambda_max`` where these differ between the series; shared values go
+    into the legend title, and labels that would still coincide get
+    ``(file:step)``.  Markers as in the paper: the smallest ``lambda_min`` filled,
+    the next open (further ones open squares, triangles, ...).
 ``fig3-adhesion.FMT``
     Fig. 3: adhesive series normalised by ``c`` and ``g0`` of a non-adhesive
     reference step, labelled by ``1/kappa_att``; dotted line at ``rho / g0``.
     The reference is ``--reference`` (then every other step is normalised by
     it) or, for runs of the paper's protocol (``control.reference =
     "non-adhesive"``), each adhesive step's own reference step (step attribute
-    ``plan.reference_step``).  Without either, no Fig. 3 is written.
+    ``plan.reference_step``).  Without either, no Fig. 3 is written.  Each
+    distinct reference is drawn once: reference steps that are the same solve
+    (:func:`solve_identity`: the same scene apart from its ``interaction``,
+    ``control`` and ``output`` sections, the same interaction and the same load,
+    as when several protocol files of one surface are given, each with its own
+    copy of the reference) are one curve, and every adhesive step of those files
+    is normalised by it; with ``--reference``, other steps that are the same
+    solve as it are not drawn again.
 ``fig4-integrand.FMT``
     Fig. 4: the normalised integrand of Eq. 16 for ``rho / g0 = 0.01, 0.1, 1``.
 
@@ -56,6 +89,8 @@ of the validated scene in the root attribute ``scene_resolved``):
   grid shape is the datasets' shape.
 * optional: ``surface.lambda_min``, ``surface.lambda_max`` (legends);
   ``plan.chain``, ``plan.reference_step`` (Fig. 3 of a protocol run);
+  ``solution.control``, ``solution.control_value`` with ``scene_resolved`` (which
+  steps of different files are the same solve, for Fig. 3);
   ``solution.contact_fraction``, ``solution.kappa_rep``, ``solution.inv_kappa_att``
   (the solver's own values, tabled next to the analysis' as a cross-check).
 
@@ -109,7 +144,9 @@ COLUMNS = [
     "work_of_adhesion", "range", "rms_slope", "rms_slope_source", "contact_modulus",
     "gap_tolerance", "contact_pixels", "c", "A_rep", "P_rep", "P_pixel_edges", "d_rep", "g0",
     "mean_pressure", "kappa_rep", "exponent", "power_law_x_min", "power_law_x_max",
-    "power_law_decades", "exponent_fixed_range", "fixed_range_x_min", "fixed_range_x_max",
+    "power_law_decades", "resolved_gap_over_g0", "fit_range_source", "fit_range_x_min",
+    "fit_range_x_max", "fit_range_bins", "fit_range_qualified", "fit_range_slope_deviation",
+    "exponent_fit_range",
     "zero_gap_fraction", "cn_g0", "cn_g0_eq14", "cn_018g0", "cn_018g0_eq14", "cn_0001g0",
     "cn_0001g0_eq14",
     "F_att", "F_att_noncontact", "F_att_eq16_printed", "F_att_eq16_exact",
@@ -231,7 +268,6 @@ class StepResult:
     distribution: object
     x: np.ndarray
     y: np.ndarray
-    label: str
     adhesive: bool
     meta: dict = field(default_factory=dict)
 
@@ -330,14 +366,32 @@ def analyse_step(result, index, args, grids, comm, log):
                zero_gap_fraction=dist.zero_gap_fraction, gap_tolerance=tol)
     x = y = np.empty(0)
     usable = 0 < c < 1 and math.isfinite(g0) and g0 > 0
+    fit_note = None
+    if usable:
+        row["resolved_gap_over_g0"] = analysis.resolved_gap(stats.mean_diameter, max(dx, dy))
     if usable and dist.centres.size:
         x, y = analysis.collapse(dist, None, c, g0)
         fit = analysis.fit_power_law(x, y)
-        fixed = analysis.fit_power_law(x, y, x_range=args.fit_range)
         row.update(exponent=fit.exponent, power_law_x_min=fit.x_min,
-                   power_law_x_max=fit.x_max, power_law_decades=fit.decades,
-                   exponent_fixed_range=fixed.exponent, fixed_range_x_min=args.fit_range[0],
-                   fixed_range_x_max=args.fit_range[1])
+                   power_law_x_max=fit.x_max, power_law_decades=fit.decades)
+        if args.fit_range is None:
+            chosen = analysis.auto_fit_range(x, y, dist.counts,
+                                             x_resolution=row["resolved_gap_over_g0"])
+            lo, hi = chosen.x_min, chosen.x_max
+            row.update(fit_range_source="auto", fit_range_qualified=chosen.qualified,
+                       fit_range_slope_deviation=chosen.slope_deviation)
+            if not chosen.qualified:
+                fit_note = chosen.reason
+        else:
+            lo, hi = args.fit_range
+            row["fit_range_source"] = "--fit-range"
+        if math.isfinite(lo) and math.isfinite(hi):
+            ranged = analysis.fit_power_law(x, y, x_range=(lo, hi))
+            row.update(fit_range_x_min=lo, fit_range_x_max=hi, fit_range_bins=ranged.npoints,
+                       exponent_fit_range=ranged.exponent)
+        if fit_note:
+            log.warning("%s: exponent fit range: %s%s", where, fit_note,
+                        "" if math.isfinite(lo) else "; pass --fit-range LO HI to fit anyway")
     if usable:
         near = analysis.near_contact_area(grid, gap, pressure,
                                           [r * g0 for r in GC_OVER_G0 + (ROUND_OFF_GAP,)],
@@ -370,15 +424,43 @@ def analyse_step(result, index, args, grids, comm, log):
                            eq16.printed, slope, modulus, stats.contact_area),
                        inv_kappa_att_eq16_exact=analysis.inverse_kappa_att(
                            eq16.exact, slope, modulus, stats.contact_area))
-    label = f"$\\lambda_{{max}}/\\lambda_{{min}}$ = {lmax / lmin:g}" if lmin and lmax else None
-    meta = {"lambda_min_a0": lmin / dx if lmin else None, "rho": rho, "reference_step": ref_step}
-    log.info("%s: c = %.4g, P_rep = %.6g (pixel edges %.6g), d_rep = %.4g, g0 = %.4g%s", where,
+    meta = {"lambda_min_a0": lmin / dx if lmin else None, "rho": rho, "reference_step": ref_step,
+            "solve": solve_identity(result, index, attrs, kind, w, rho)}
+    finite = [k for k in ("exponent", "exponent_fit_range")
+              if row[k] is not None and math.isfinite(row[k])]
+    log.info("%s: c = %.4g, P_rep = %.6g (pixel edges %.6g), d_rep = %.4g, g0 = %.4g%s%s", where,
              c, stats.perimeter, stats.pixel_edge_length, stats.mean_diameter, g0,
              f", exponent {row['exponent']:.3f} over x = {row['power_law_x_min']:.3g} .. "
-             f"{row['power_law_x_max']:.3g}" if row["exponent"] is not None
-             and math.isfinite(row["exponent"]) else "")
-    return StepResult(row=row, distribution=dist, x=x, y=y, label=label, adhesive=adhesive,
-                      meta=meta)
+             f"{row['power_law_x_max']:.3g}" if "exponent" in finite else "",
+             f", {row['exponent_fit_range']:.3f} over the {row['fit_range_source']} fit range "
+             f"{row['fit_range_x_min']:.3g} .. {row['fit_range_x_max']:.3g}"
+             if "exponent_fit_range" in finite else "")
+    return StepResult(row=row, distribution=dist, x=x, y=y, adhesive=adhesive, meta=meta)
+
+
+def solve_identity(result, index, attrs, kind, w, rho):
+    """What identifies the solve that produced a step, across files (see :func:`fig3_groups`).
+
+    Two steps are the same solve if their files' validated scenes agree in everything
+    but the ``interaction``, ``control`` and ``output`` sections (grid, surface with its
+    seed, material, solver), the interaction applied to the step agrees, and the step's
+    own control (``solution.control`` and ``solution.control_value``: the load of a
+    non-adhesive reference) agrees.  Without the scene or the step's control attributes
+    a step is only itself: ``("file", resolved path, index)``.
+    """
+    scene = dict(next((d for label, d in attrs.sources if label == "scene_resolved"), {}))
+    control, _ = attrs.find(["solution.control"], "control kind", required=False, kind=str)
+    value, _ = attrs.find(["solution.control_value"], "control value", required=False)
+    if not scene or control is None or value is None:
+        try:
+            path = str(Path(result.path).resolve())
+        except OSError:
+            path = str(result.path)
+        return ("file", path, int(index))
+    shared = {k: v for k, v in scene.items()
+              if not k.startswith(("interaction.", "control.", "output."))}
+    return ("solve", json.dumps(shared, sort_keys=True, default=str), kind, w, rho, control,
+            float(value))
 
 
 def analyse_inputs(inputs, args, comm, log):
@@ -448,7 +530,10 @@ def _clean(value):
     return value
 
 
-def write_tables(results, args, groups):
+def write_tables(results, args, groups, fig2, fig3):
+    """The CSV and JSON tables; ``fig2``, ``fig3`` are the drawn series (:func:`fig2_series`,
+    :func:`fig3_series`), recorded with their legend labels."""
+    from petgap import analysis
     rows = [{k: _clean(r.row.get(k)) for k in COLUMNS} for r in results]
     path = args.output_dir / f"{TABLE_STEM}.csv"
     with open(path, "w", newline="") as fh:
@@ -469,6 +554,12 @@ def write_tables(results, args, groups):
             "collapse": "x = g/g0, y = 3 g0 (1-c) density / (2 pi c); Eq. 13: y = x^(-1/3)",
             "power_law": "longest run of bins with local slope within 0.1 of -1/3 and y within "
                          "a factor 2 of x^(-1/3) (petgap.analysis.fit_power_law)",
+            "resolved_gap_over_g0": "(max(dx, dy) / (2 d_rep))^(3/2): the gap half a pixel "
+                                    "from a contact edge by Eq. 12, over g0 "
+                                    "(petgap.analysis.resolved_gap)",
+            "fit_range": fit_range_rule(),
+            "exponent_fit_range": "least-squares slope of log y on log x over the bins with "
+                                  "fit_range_x_min <= x <= fit_range_x_max",
             "cn": "fraction of A0 with 0 < g < g_c; eq14 = pi c (g_c/g0)^(2/3)",
             "F_att": "-sum dx dy v'(g) over all pixels (< 0 attractive); F_att_noncontact: "
                      "pixels not in repulsive contact",
@@ -476,11 +567,32 @@ def write_tables(results, args, groups):
             "F_att_eq16_exact": "the integral of Eq. 16 exactly: Gamma(2/3) x printed",
             "inv_kappa_att": "-F_att / (h0' E* A_rep)",
             "kappa_rep": "A_rep h0' E* / F_rep, F_rep = repulsive (wall) force in contact",
+            "fig3_references": "each distinct non-adhesive reference once: steps of the same "
+                               "scene (apart from interaction, control, output), the same "
+                               "interaction and the same load are one solve; the others are "
+                               "listed as duplicates",
         },
-        "fig3_references": [{"file": ref.row["file"], "step": ref.row["step"],
-                             "c": _clean(ref.row["c"]), "g0": _clean(ref.row["g0"]),
-                             "normalised_steps": [[m.row["file"], m.row["step"]] for m in members]}
-                            for ref, members in groups],
+        "fit_range": {"option": None if args.fit_range is None else list(args.fit_range),
+                      "auto": {"resolution_factor": analysis.FIT_RESOLUTION_FACTOR,
+                               "x_max": analysis.FIT_X_MAX,
+                               "slope_band": analysis.FIT_SLOPE_BAND,
+                               "slope_window_decades": analysis.FIT_SLOPE_WINDOW,
+                               "min_decades": analysis.FIT_MIN_DECADES,
+                               "min_count": analysis.FIT_MIN_COUNT,
+                               "sigmas": analysis.FIT_SIGMAS}},
+        "fig3_references": [{"file": g.reference.row["file"], "step": g.reference.row["step"],
+                             "c": _clean(g.reference.row["c"]),
+                             "g0": _clean(g.reference.row["g0"]),
+                             "normalised_steps": [[m.row["file"], m.row["step"]]
+                                                  for m in g.members],
+                             "duplicates": [[d.row["file"], d.row["step"]]
+                                            for d in g.duplicates]}
+                            for g in groups],
+        "legends": {"fig2": [{"file": s.result.row["file"], "step": s.result.row["step"],
+                              "label": s.label} for s in fig2.series],
+                    "fig2_title": fig2.title,
+                    "fig3": [{"file": s.result.row["file"], "step": s.result.row["step"],
+                              "reference": s.is_reference, "label": s.label} for s in fig3]},
         "rows": rows,
         "distributions": [{"file": r.row["file"], "step": r.row["step"],
                            "edges": r.distribution.edges.tolist(),
@@ -492,6 +604,22 @@ def write_tables(results, args, groups):
     with open(args.output_dir / f"{TABLE_STEM}.json", "w") as fh:
         json.dump(doc, fh, indent=1)
         fh.write("\n")
+
+
+def fit_range_rule():
+    """The rule of the default exponent fit range, in words (``--help``, JSON conventions)."""
+    from petgap import analysis as a
+    return (f"the widest range of x = g/g0, at least {a.FIT_MIN_DECADES:g} decade, between "
+            f"{a.FIT_RESOLUTION_FACTOR:g} x_res and {a.FIT_X_MAX:g} (x_res = "
+            f"(a0 / (2 d_rep))^(3/2): the gap half a pixel from a contact edge by Eq. 12, "
+            f"the smallest resolved gap; column resolved_gap_over_g0), over bins of at least "
+            f"{a.FIT_MIN_COUNT} pixels, where p(g) falls with g and the local log-log slope "
+            f"(least squares over +-{a.FIT_SLOPE_WINDOW:g} decade) stays within "
+            f"{a.FIT_SLOPE_BAND:g} of its median, plus {a.FIT_SIGMAS:g} standard errors from the "
+            f"bin counts (petgap.analysis.auto_fit_range); if no range qualifies, the flattest "
+            f"{a.FIT_MIN_DECADES:g} decade (fit_range_qualified false, and a warning). The "
+            f"range used is recorded in the columns fit_range_source, fit_range_x_min, "
+            f"fit_range_x_max and fit_range_bins")
 
 
 def _pyplot():
@@ -513,69 +641,175 @@ def _power_law_line(ax, xs):
             zorder=5)
 
 
-def _labels(results):
-    """Legend labels: lambda_max/lambda_min where known and unique, plus file:step otherwise."""
-    labels = []
-    for r in results:
-        where = f"{Path(r.row['file']).stem}:{r.row['step']}"
-        same = sum(1 for o in results if o.label == r.label)
-        labels.append(r.label if r.label and same == 1 else
-                      f"{r.label} ({where})" if r.label else where)
-    return labels
+def _number(value):
+    """``32`` for 32.0000001, else three significant digits."""
+    if value is None or not math.isfinite(value):
+        return "?"
+    near = round(value)
+    return f"{near:d}" if near and abs(value - near) <= 1e-6 * abs(value) else f"{value:.3g}"
 
 
-def figure2(results, path):
+@dataclass
+class Fig2Series:
+    """One series of Fig. 2: its step, legend label and marker."""
+    result: StepResult
+    label: str
+    marker: str
+    filled: bool
+
+
+@dataclass
+class Fig2Legend:
+    series: list
+    title: str
+
+
+#: Fig. 2 markers by rank of lambda_min (the smallest filled, as in the paper).
+FIG2_MARKERS = ("o", "o", "s", "^", "D", "v", "<", ">")
+
+
+def fig2_series(results):
+    """Legend labels and markers of Fig. 2 (pure; the same on every rank).
+
+    Each series is labelled with what tells it apart, in the paper's parameters:
+    ``lambda_min`` in pixels always (where known), ``lambda_max / lambda_min`` and
+    ``L / lambda_max`` where they differ between the series; the parameters that
+    all series share go into the legend title.  Series whose labels would still be
+    equal get ``(file:step)``; series without ``lambda_min`` are labelled
+    ``file:step``.  Markers: the smallest ``lambda_min`` filled circles, the next
+    open circles (the paper's Fig. 2), further ones open squares, triangles, ...
+    """
+    def params(r):
+        row = r.row
+        lmin, lmax = row["lambda_min"], row["lambda_max"]
+        lx, ly = row["nx"] * row["dx"], row["ny"] * row["dy"]
+        return {"lmin": r.meta["lambda_min_a0"],
+                "ratio": lmax / lmin if lmin and lmax else None,
+                "L": (lx / lmax, ly / lmax) if lmax else None}
+
+    plotted = [r for r in results if np.any(r.y > 0)]
+    info = [params(r) for r in plotted]
+
+    def varies(key):
+        values = {_key(p[key]) for p in info if p[key] is not None}
+        return len(values) > 1
+
+    def text(key, value):
+        if key == "lmin":
+            return f"$\\lambda_{{min}} = {_number(value)}\\,a_0$"
+        if key == "ratio":
+            return f"$\\lambda_{{max}}/\\lambda_{{min}} = {_number(value)}$"
+        lx, ly = value
+        both = _number(lx) if _key(lx) == _key(ly) else f"{_number(lx)} \\times {_number(ly)}"
+        return f"$L/\\lambda_{{max}} = {both}$"
+
+    shown = ["lmin"] + [k for k in ("ratio", "L") if varies(k)]
+    title = []
+    for key in ("ratio", "L"):
+        known = [p[key] for p in info if p[key] is not None]
+        if key not in shown and known:
+            title.append(text(key, known[0]))
+    labels = [", ".join(text(k, p[k]) for k in shown if p[k] is not None)
+              if p["lmin"] is not None else "" for p in info]
+    _disambiguate(labels, plotted)
+    lmins = sorted({_key(p["lmin"]) for p in info if p["lmin"] is not None})
+    series = []
+    for r, p, label in zip(plotted, info, labels):
+        rank = lmins.index(_key(p["lmin"])) if p["lmin"] is not None else 0
+        series.append(Fig2Series(r, label, FIG2_MARKERS[min(rank, len(FIG2_MARKERS) - 1)],
+                                 rank == 0))
+    return Fig2Legend(series, ", ".join(title))
+
+
+def _disambiguate(labels, results):
+    """Make ``labels`` unique in place: ``file:step`` for empty labels, appended to equal ones
+    (the file's stem, or its path where stems coincide)."""
+    def where(i, full):
+        name = results[i].row["file"] if full else Path(results[i].row["file"]).stem
+        return f"{name}:{results[i].row['step']}"
+
+    groups = {}
+    for i, label in enumerate(labels):
+        groups.setdefault(label, []).append(i)
+    for label, members in groups.items():
+        if label and len(members) == 1:
+            continue
+        full = len({where(i, False) for i in members}) < len(members)
+        for i in members:
+            labels[i] = f"{label} ({where(i, full)})" if label else where(i, full)
+
+
+def _key(value):
+    """A hashable, round-off-insensitive key of a number or a tuple of numbers."""
+    if isinstance(value, tuple):
+        return tuple(_key(v) for v in value)
+    return float(f"{value:.9g}")
+
+
+def figure2(legend, results, path):
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.5, 4.2))
-    lmins = sorted({r.meta["lambda_min_a0"] for r in results if r.meta["lambda_min_a0"]})
-    for r, label in zip(results, _labels(results)):
-        keep = r.y > 0
-        if not np.any(keep):
-            continue
-        filled = not lmins or r.meta["lambda_min_a0"] in (None, lmins[0])
-        ax.loglog(r.x[keep], r.y[keep], "o", ms=4, fillstyle="full" if filled else "none",
-                  label=label)
+    for s in legend.series:
+        keep = s.result.y > 0
+        ax.loglog(s.result.x[keep], s.result.y[keep], s.marker, ms=4,
+                  fillstyle="full" if s.filled else "none", label=s.label)
     _power_law_line(ax, [r.x for r in results])
     ax.set_xlabel("$g/g_0$")
     ax.set_ylabel(r"$p(g)\,/\,(2\pi c / 3 g_0)$")
     ax.set_title("Gap distribution of non-contacting points (Fig. 2)", fontsize=10)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, title=legend.title or None, title_fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=150)
     plt.close(fig)
 
 
-def figure3(groups, path):
-    """Fig. 3: each group's members normalised by its (non-adhesive) reference's c and g0."""
-    from petgap import analysis
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(5.5, 4.2))
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    xs, rhos, k = [], set(), 0
-    for ref, members in groups:
-        c, g0 = ref.row["c"], ref.row["g0"]
-        for r in [ref] + members:
-            d = r.distribution
-            if not d.centres.size:
+@dataclass
+class Fig3Series:
+    """One series of Fig. 3: a step, the reference it is normalised by, its label."""
+    result: StepResult
+    reference: StepResult
+    is_reference: bool
+    label: str
+
+
+def fig3_series(groups):
+    """The series of Fig. 3, each distinct reference once, then its members (pure)."""
+    out = []
+    for g in groups:
+        ref = g.reference
+        for r in [ref] + g.members:
+            if not r.distribution.centres.size:
                 continue
-            x, y = analysis.collapse(d, None, c, g0)
-            keep = y > 0
             inv = r.row["inv_kappa_att"] if r.adhesive else 0.0
             label = f"$1/\\kappa_{{att}}$ = {inv:.2g}" if inv is not None and math.isfinite(inv) \
                 else f"{Path(r.row['file']).stem}:{r.row['step']}"
             label += f", $A_{{rep}}/A_0$ = {r.row['c']:.3g}"
             if len(groups) > 1:
-                label += f" (ref. step {ref.row['step']})"
-            ax.loglog(x[keep], y[keep], "o" if r is ref else "s", ms=4,
-                      color=colours[k % len(colours)],
-                      fillstyle="full" if r is ref else "none", label=label)
-            k += 1
-            xs.append(x)
-            if r.meta["rho"]:
-                rhos.add(r.meta["rho"] / g0)
+                label += f" (ref. {Path(ref.row['file']).stem}:{ref.row['step']})"
+            out.append(Fig3Series(r, ref, r is ref, label))
+    return out
+
+
+def figure3(series, path):
+    """Fig. 3: each series normalised by its (non-adhesive) reference's c and g0."""
+    from petgap import analysis
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5.5, 4.2))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    xs, rhos = [], {}
+    for k, s in enumerate(series):
+        c, g0 = s.reference.row["c"], s.reference.row["g0"]
+        x, y = analysis.collapse(s.result.distribution, None, c, g0)
+        keep = y > 0
+        ax.loglog(x[keep], y[keep], "o" if s.is_reference else "s", ms=4,
+                  color=colours[k % len(colours)],
+                  fillstyle="full" if s.is_reference else "none", label=s.label)
+        xs.append(x)
+        if s.result.meta["rho"]:   # one line per value as labelled
+            rhos.setdefault(f"{s.result.meta['rho'] / g0:.3g}", s.result.meta["rho"] / g0)
     _power_law_line(ax, xs)
-    for rho in sorted(rhos):
-        ax.axvline(rho, color="0.5", ls=":", lw=1.2, label=f"$\\rho/g_0$ = {rho:.3g}")
+    for text, rho in sorted(rhos.items(), key=lambda item: item[1]):
+        ax.axvline(rho, color="0.5", ls=":", lw=1.2, label=f"$\\rho/g_0$ = {text}")
     ax.set_xlabel("$g/g_0$ (non-adhesive $g_0$)")
     ax.set_ylabel(r"$p(g)\,/\,(2\pi c / 3 g_0)$ (non-adhesive $c$, $g_0$)")
     ax.set_title("Adhesive gap distributions (Fig. 3)", fontsize=10)
@@ -629,9 +863,12 @@ def build_parser(rank=0):
                         "first complete one)")
     p.add_argument("--format", choices=("png", "pdf", "svg"), default="png",
                    help="figure file format (default png)")
-    p.add_argument("--fit-range", nargs=2, type=positive_float, default=(0.01, 0.1),
+    p.add_argument("--fit-range", nargs=2, type=positive_float, default=None,
                    metavar=("LO", "HI"),
-                   help="x = g/g0 range of the fixed-range exponent fit (default 0.01 0.1)")
+                   help="x = g/g0 range of the exponent fit of Eq. 13 (column "
+                        "exponent_fit_range); given, exactly this range for every step. "
+                        "Default: chosen per step from its data: "
+                        + fit_range_rule().replace("%", "%%"))
     p.add_argument("--gap-tolerance", type=float, default=None, metavar="G",
                    help="gaps <= G (length units) count as zero gap: contact where p > 0, "
                         "'zero gap' (not in the histogram) elsewhere (default: 1e-6 x the "
@@ -652,7 +889,7 @@ def main(argv=None):
     except SystemExit as exc:  # same argv everywhere: every rank exits alike
         return exc.code if isinstance(exc.code, int) else EXIT_USAGE
     problem = None
-    if not args.fit_range[0] < args.fit_range[1]:
+    if args.fit_range is not None and not args.fit_range[0] < args.fit_range[1]:
         problem = "--fit-range LO HI needs LO < HI"
     elif args.gap_tolerance is not None and not (math.isfinite(args.gap_tolerance)
                                                  and args.gap_tolerance >= 0):
@@ -690,19 +927,62 @@ def _usable(r):
     return 0 < c < 1 and g0 is not None and math.isfinite(g0) and g0 > 0
 
 
-def fig3_groups(results, reference):
-    """``[(reference, [members])]`` for Fig. 3 (see the module docstring)."""
+@dataclass
+class Fig3Group:
+    """A reference step of Fig. 3, the steps normalised by it, and the other steps that are
+    the same solve as the reference (drawn once, through ``reference``)."""
+    reference: StepResult
+    members: list = field(default_factory=list)
+    duplicates: list = field(default_factory=list)
+
+
+def _same_step(a, b):
+    return a.row["file"] == b.row["file"] and a.row["step"] == b.row["step"]
+
+
+def fig3_groups(results, reference, log=None):
+    """The :class:`Fig3Group` list of Fig. 3 (see the module docstring).
+
+    With ``reference`` every other step is normalised by it, except steps that are
+    the same solve (:func:`solve_identity`), which are duplicates of it.  Without it
+    each step that names a reference step of its own file (``plan.reference_step``)
+    is normalised by that step, and reference steps that are the same solve --
+    several protocol files of one surface and load, each with its own copy of the
+    non-adhesive reference -- form one group, drawn once, with the first of them as
+    its reference.
+    """
     if reference is not None:
-        members = [r for r in results if not (r.row["file"] == reference.row["file"]
-                                              and r.row["step"] == reference.row["step"])]
-        return [(reference, members)]
-    groups = {}
-    by_key = {(r.row["file"], r.row["step"]): r for r in results}
-    for r in results:
-        ref = by_key.get((r.row["file"], r.meta["reference_step"]))
-        if r.meta["reference_step"] is not None and ref is not None and _usable(ref):
-            groups.setdefault((ref.row["file"], ref.row["step"]), (ref, []))[1].append(r)
-    return list(groups.values())
+        group = Fig3Group(reference)
+        for r in results:
+            if _same_step(r, reference):
+                continue
+            if r.meta["solve"] == reference.meta["solve"]:
+                group.duplicates.append(r)
+            else:
+                group.members.append(r)
+        groups = [group]
+    else:
+        by_step = {(r.row["file"], r.row["step"]): r for r in results}
+        by_solve = {}
+        for r in results:
+            ref = by_step.get((r.row["file"], r.meta["reference_step"]))
+            if r.meta["reference_step"] is None or ref is None or not _usable(ref):
+                continue
+            group = by_solve.setdefault(ref.meta["solve"], Fig3Group(ref))
+            if not _same_step(ref, group.reference) and \
+                    not any(_same_step(ref, d) for d in group.duplicates):
+                group.duplicates.append(ref)
+            group.members.append(r)
+        groups = list(by_solve.values())
+    for group in groups:
+        ref = group.reference
+        for d in group.duplicates:
+            if d.row["contact_pixels"] != ref.row["contact_pixels"] and log is not None:
+                log.warning("%s:%s is the same solve as the Fig. 3 reference %s:%s (same scene "
+                            "and load) but has %s contact pixels against %s; drawing the "
+                            "reference only", d.row["file"], d.row["step"], ref.row["file"],
+                            ref.row["step"], d.row["contact_pixels"], ref.row["contact_pixels"])
+    return groups
 
 
 def _run(args, inputs, comm, log):
@@ -721,18 +1001,19 @@ def _run(args, inputs, comm, log):
         if not _usable(reference):
             raise PostError(f"--reference {args.reference.text}: contact fraction "
                             f"{reference.row['c']:g} gives no g0 to normalise by")
-    groups = fig3_groups(results, reference)
+    groups = fig3_groups(results, reference, log)
     if not groups:
         log.info("no Fig. 3: no --reference, and no adhesive step names a reference step")
+    fig2, fig3 = fig2_series(results), fig3_series(groups)
 
     def write():
-        write_tables(results, args, groups)
+        write_tables(results, args, groups, fig2, fig3)
         paths = [args.output_dir / f"{TABLE_STEM}.csv", args.output_dir / f"{TABLE_STEM}.json"]
         paths.append(args.output_dir / f"{FIG2_STEM}.{args.format}")
-        figure2(results, paths[-1])
+        figure2(fig2, results, paths[-1])
         if groups:
             paths.append(args.output_dir / f"{FIG3_STEM}.{args.format}")
-            figure3(groups, paths[-1])
+            figure3(fig3, paths[-1])
         paths.append(args.output_dir / f"{FIG4_STEM}.{args.format}")
         figure4(paths[-1])
         return [str(p) for p in paths]

@@ -385,6 +385,72 @@ def test_power_law_window_on_a_known_curve():
     assert math.isnan(none.exponent) and none.npoints == 0
 
 
+def _broken_power_law(x1, x2, exponent, per_decade=10, scale=None, seed=0, shift=0.0):
+    """Collapsed data with ``y = x^exponent`` exactly on ``x1 <= x <= x2``: flat below (the
+    roll-off), rising as ``x^(1/2)`` above (towards the Gaussian peak); with ``scale``, the
+    counts of a histogram of ``scale`` pixels per unit ``y dx``, drawn from Poisson laws."""
+    edges = np.geomspace(1e-5, 3.0, int(round(per_decade * math.log10(3e5))) + 1) * 10 ** shift
+    x = np.sqrt(edges[1:] * edges[:-1])
+    y = np.where(x < x1, x1 ** exponent, np.where(x > x2, x2 ** exponent * np.sqrt(x / x2),
+                                                  x ** exponent))
+    if scale is None:
+        return x, y, None
+    counts = np.random.default_rng(seed).poisson(scale * y * np.diff(edges))
+    return x, counts / (scale * np.diff(edges)), counts
+
+
+@pytest.mark.parametrize("x1, x2", [(1e-3, 3e-2), (2e-3, 2e-2)])
+@pytest.mark.parametrize("exponent", [-1 / 3, -0.5])
+def test_auto_fit_range_lands_inside_a_known_power_law(x1, x2, exponent):
+    """The default fit range of petgap-post: inside the power law, and its exponent.
+
+    The resolution bound is put half a decade below the power law, so the roll-off and the
+    rise are both inside the bounds and the range has to be found from the data."""
+    decades = math.log10(x2 / x1)
+    cases = [_broken_power_law(x1, x2, exponent, shift=shift) for shift in (0.0, 0.05)]
+    # ~1e4-1e5 pixels per bin, as in the near-contact bins of a 2048^2-4096^2 run
+    cases += [_broken_power_law(x1, x2, exponent, scale=1e7, seed=seed) for seed in range(3)]
+    for k, (x, y, counts) in enumerate(cases):
+        chosen = analysis.auto_fit_range(x, y, counts, x_resolution=x1 / 10)
+        fit = analysis.fit_power_law(x, y, x_range=(chosen.x_min, chosen.x_max))
+        assert chosen.bound_min == pytest.approx(0.3 * x1) and chosen.bound_max == 0.1
+        assert x1 <= chosen.x_min < chosen.x_max <= x2, (k, chosen)
+        assert math.log10(chosen.x_max / chosen.x_min) >= decades - 0.6, (k, chosen)
+        if counts is None:
+            assert fit.exponent == pytest.approx(exponent, abs=1e-9)
+        else:
+            assert fit.exponent == pytest.approx(exponent, abs=0.01)
+    # the former fixed default, 0.01 .. 0.1, sits on the rise here
+    x, y, _ = cases[0]
+    assert abs(analysis.fit_power_law(x, y, x_range=(0.01, 0.1)).exponent - exponent) > 0.2
+
+
+def test_auto_fit_range_without_a_range():
+    x, y, counts = _broken_power_law(1e-3, 3e-2, -1 / 3, scale=1e7)
+    # the resolution bound above 0.1 g0: nothing to fit
+    none = analysis.auto_fit_range(x, y, counts, x_resolution=0.05)
+    assert math.isnan(none.x_min) and none.npoints == 0 and not none.qualified
+    assert "resolution bound" in none.reason
+    # p(g) rising everywhere (no near-contact divergence)
+    rising = analysis.auto_fit_range(x, x ** 0.5, None, x_resolution=1e-4)
+    assert math.isnan(rising.x_min) and "does not decrease" in rising.reason
+    # too few populated bins
+    sparse = analysis.auto_fit_range(x, y, np.where(x < 0.07, 0, counts), x_resolution=1e-4)
+    assert math.isnan(sparse.x_min) and "fewer than 3 bins" in sparse.reason
+    # coarse bins (2 per decade): local slopes from the neighbours, still inside
+    x, y, _ = _broken_power_law(1e-3, 1e-1, -1 / 3, per_decade=2)
+    coarse = analysis.auto_fit_range(x, y, None, x_resolution=1e-4)
+    assert 1e-3 <= coarse.x_min < coarse.x_max <= 0.1
+    with pytest.raises(ValueError, match="x_resolution"):
+        analysis.auto_fit_range(x, y, x_resolution=0.0)
+
+
+def test_resolved_gap_is_eq12_half_a_pixel_from_the_edge():
+    d_rep, a0, g0 = 40.0, 1.0, 5.0
+    gap = g0 * (0.5 * a0 / d_rep) ** 1.5               # Eq. 12 at s = a0 / 2
+    assert analysis.resolved_gap(d_rep, a0) == pytest.approx(gap / g0, rel=1e-14)
+
+
 def test_collapse_definition():
     """y = 3 g0 (1 - c) density / (2 pi c): Eq. 13 itself maps onto y = x^(-1/3)."""
     c, g0 = 0.04, 3.0
@@ -531,7 +597,7 @@ def test_post_cli_tables_and_figures(comm, mpi_tmp_path, run_cli):
     assert r0["chain"] == "reference" and r1["reference_step"] == 0
     assert r0["c_solver"] == 0.123 and r1["c_solver"] is None   # the solver's value, tabled
     assert doc["fig3_references"] == [{"file": str(run), "step": 0, "c": r0["c"], "g0": r0["g0"],
-                                       "normalised_steps": [[str(run), 1]]}]
+                                       "normalised_steps": [[str(run), 1]], "duplicates": []}]
     header = (out / "gap-analysis.csv").read_text().splitlines()[0].split(",")
     assert {"c", "A_rep", "P_rep", "d_rep", "g0", "exponent", "power_law_x_min", "cn_g0",
             "cn_018g0_eq14", "F_att", "F_att_eq16_printed", "F_att_eq16_exact",
@@ -576,3 +642,146 @@ def test_post_cli_errors(comm, mpi_tmp_path, run_cli):
     assert "step_0000" in results[2].stderr
     assert "not a petgap result file" in results[3].stderr
     assert "no step 7" in results[4].stderr
+
+
+def _protocol_run(comm, path, shape, reference, adhesive, w, seed=1, load=0.002, rho=0.5):
+    """A result file of the paper's protocol as petgap run writes it: step 0 the non-adhesive
+    reference at ``load``, step 1 the adhesive solve at its mean gap; one ``w`` per file."""
+    scene = json.loads(json.dumps(SCENE))
+    scene["surface"]["seed"] = seed
+    scene["interaction"] = {"kind": "exponential", "work_of_adhesion": w, "range": rho}
+    scene["control"] = {"kind": "load", "values": [load], "reference": "non-adhesive"}
+    (g, p), (ga, pa) = reference, adhesive
+    _write_run(comm, path, shape, [
+        ({"gap": g, "pressure": p},
+         {"plan": {"chain": "reference", "adhesive": False, "reference_step": -1},
+          "interaction": {"kind": "hard-wall"},
+          "solution": {"control": "load", "control_value": load}}),
+        ({"gap": ga, "pressure": pa},
+         {"plan": {"chain": "adhesive", "adhesive": True, "reference_step": 0},
+          "interaction": {"kind": "exponential", "work_of_adhesion": w, "range": rho},
+          "solution": {"control": "mean-gap", "control_value": float(np.mean(g))}})],
+        scene=scene)
+
+
+def test_post_cli_fig3_draws_each_reference_once(comm, mpi_tmp_path, run_cli):
+    """Several protocol files of one surface and load: one reference curve, not one per file."""
+    shape = (48, 40)
+    specs = [((12.3, 10.2), 5.2, 30.0), ((30.6, 27.9), 6.1, 25.0), ((23.5, 0.4), 3.9, 20.0)]
+    g, p = _discs(shape, specs)
+    g2, p2 = _discs(shape, [((20.1, 19.7), 7.0, 30.0)])       # another surface (seed 2)
+    files = []
+    for k, w in enumerate((1e-3, 2e-3, 4e-3)):
+        path = mpi_tmp_path / f"protocol_w{w:g}.h5"
+        adhesive = (g * (1 - 0.05 * (k + 1)), p - w / 0.5 * np.exp(-g / 0.5) * (g > 0))
+        _protocol_run(comm, path, shape, (g, p), adhesive, w)
+        files.append(path)
+    other = mpi_tmp_path / "protocol_seed2.h5"
+    _protocol_run(comm, other, shape, (g2, p2), (0.9 * g2, p2), 2e-3, seed=2)
+    out, explicit = mpi_tmp_path / "post", mpi_tmp_path / "post-ref"
+    proc = run_cli(["petgap-post", *files, other, "-o", out, "-q"], ranks=2)
+    with_ref = run_cli(["petgap-post", *files, other, "--reference", f"{files[1]}:0",
+                        "-o", explicit, "-q"], ranks=1)
+
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((out / "gap-analysis.json").read_text())
+    refs = doc["fig3_references"]
+    assert [(r["file"], r["step"]) for r in refs] == [(str(files[0]), 0), (str(other), 0)]
+    assert refs[0]["normalised_steps"] == [[str(f), 1] for f in files]
+    assert refs[0]["duplicates"] == [[str(f), 0] for f in files[1:]]
+    assert refs[1]["normalised_steps"] == [[str(other), 1]] and refs[1]["duplicates"] == []
+    drawn = [(s["file"], s["step"]) for s in doc["legends"]["fig3"] if s["reference"]]
+    assert drawn == [(str(files[0]), 0), (str(other), 0)]       # each distinct reference once
+    assert len(doc["legends"]["fig3"]) == 6
+    assert all("(ref. protocol_" in s["label"] for s in doc["legends"]["fig3"])
+    # --reference: the other files' copies of it are not drawn again; the other surface is
+    assert with_ref.returncode == 0, with_ref.stderr
+    ref_doc = json.loads((explicit / "gap-analysis.json").read_text())
+    (ref,) = ref_doc["fig3_references"]
+    assert (ref["file"], ref["step"]) == (str(files[1]), 0)
+    assert ref["duplicates"] == [[str(files[0]), 0], [str(files[2]), 0]]
+    assert ref["normalised_steps"] == [[str(f), 1] for f in files] + [[str(other), 0],
+                                                                      [str(other), 1]]
+    assert sum(s["reference"] for s in ref_doc["legends"]["fig3"]) == 1
+
+
+def test_post_cli_fig2_legend_names_lambda_min(comm, mpi_tmp_path, run_cli):
+    """Every Fig. 2 label says lambda_min; lambda_max / lambda_min and L / lambda_max where
+    they differ; what all series share goes into the legend title."""
+    shape = (48, 40)
+    g, p = _discs(shape, [((12.3, 10.2), 5.2, 30.0), ((30.6, 27.9), 6.1, 25.0)])
+    runs = []
+    for name, lmin, lmax in [("a", 4.0, 16.0), ("b", 8.0, 32.0), ("c", 4.0, 8.0)]:
+        scene = json.loads(json.dumps(SCENE))
+        scene["surface"].update(lambda_min=lmin, lambda_max=lmax)
+        path = mpi_tmp_path / f"{name}.h5"
+        _write_run(comm, path, shape, [({"gap": g, "pressure": p}, {})], scene=scene)
+        runs.append(path)
+    out_all, out_same = mpi_tmp_path / "all", mpi_tmp_path / "same"
+    both = run_cli(["petgap-post", *runs, "-o", out_all, "-q"], ranks=1)
+    # a and b: the same ratio 4 and L / lambda_max = 3 x 2.5 vs 1.5 x 1.25
+    pair = run_cli(["petgap-post", runs[0], runs[1], "-o", out_same, "-q"], ranks=1)
+
+    assert both.returncode == 0, both.stderr
+    legends = json.loads((out_all / "gap-analysis.json").read_text())["legends"]
+    labels = [s["label"] for s in legends["fig2"]]
+    assert labels == [
+        r"$\lambda_{min} = 4\,a_0$, $\lambda_{max}/\lambda_{min} = 4$, "
+        r"$L/\lambda_{max} = 3 \times 2.5$",
+        r"$\lambda_{min} = 8\,a_0$, $\lambda_{max}/\lambda_{min} = 4$, "
+        r"$L/\lambda_{max} = 1.5 \times 1.25$",
+        r"$\lambda_{min} = 4\,a_0$, $\lambda_{max}/\lambda_{min} = 2$, "
+        r"$L/\lambda_{max} = 6 \times 5$"]
+    assert legends["fig2_title"] == ""
+    assert pair.returncode == 0, pair.stderr
+    legends = json.loads((out_same / "gap-analysis.json").read_text())["legends"]
+    assert [s["label"] for s in legends["fig2"]] == [
+        r"$\lambda_{min} = 4\,a_0$, $L/\lambda_{max} = 3 \times 2.5$",
+        r"$\lambda_{min} = 8\,a_0$, $L/\lambda_{max} = 1.5 \times 1.25$"]
+    assert legends["fig2_title"] == r"$\lambda_{max}/\lambda_{min} = 4$"
+
+
+def test_post_cli_fit_range(comm, mpi_tmp_path, run_cli):
+    """The exponent's fit range: chosen from the data by default and recorded; --fit-range
+    overrides it; a reversed range is a usage error."""
+    # one square contact of c = 0.05 (d_rep = pi s / 4 ~ 45 a0, g0 ~ 6 a0), the other pixels'
+    # gaps drawn from Eq. 13 with g0 = 20 (so y ~ x^(-1/3) up to x ~ 3 in petgap-post's g0)
+    shape, side = (256, 256), 57
+    gaps, _, _ = _eq13_sample(shape, side * side / (256 * 256), 20.0, 2)
+    block = np.zeros(shape, dtype=bool)
+    block[100:100 + side, 30:30 + side] = True
+    order = np.random.default_rng(5).permutation(np.count_nonzero(~block))
+    g = np.zeros(shape)
+    g[~block] = np.sort(gaps.ravel())[-np.count_nonzero(~block):][order]
+    p = np.where(block, 1e-3, 0.0)
+    run = mpi_tmp_path / "eq13.h5"
+    _write_run(comm, run, shape, [({"gap": g, "pressure": p}, {})])
+    auto, fixed = mpi_tmp_path / "auto", mpi_tmp_path / "fixed"
+    default = run_cli(["petgap-post", run, "-o", auto, "-q"], ranks=2)
+    given = run_cli(["petgap-post", run, "-o", fixed, "-q", "--fit-range", "0.002", "0.05"],
+                    ranks=1)
+    reversed_ = run_cli(["petgap-post", run, "-o", mpi_tmp_path / "x", "--fit-range", "0.1",
+                         "0.01"], ranks=1)
+
+    assert default.returncode == 0, default.stderr
+    doc = json.loads((auto / "gap-analysis.json").read_text())
+    (row,) = doc["rows"]
+    assert row["fit_range_source"] == "auto" and row["fit_range_qualified"] is True
+    x_res = row["resolved_gap_over_g0"]
+    assert x_res == pytest.approx((1.0 / (2 * row["d_rep"])) ** 1.5)
+    assert 3 * x_res <= row["fit_range_x_min"] < row["fit_range_x_max"] <= 0.1
+    assert row["fit_range_bins"] >= 5
+    assert row["exponent_fit_range"] == pytest.approx(-1 / 3, abs=0.02)
+    assert doc["fit_range"]["option"] is None and doc["fit_range"]["auto"]["x_max"] == 0.1
+    with open(auto / "gap-analysis.csv") as fh:
+        csv_row = next(iter(__import__("csv").DictReader(fh)))
+    assert csv_row["fit_range_source"] == "auto"
+    assert float(csv_row["fit_range_x_min"]) == pytest.approx(row["fit_range_x_min"])
+    assert float(csv_row["exponent_fit_range"]) == pytest.approx(row["exponent_fit_range"])
+    assert given.returncode == 0, given.stderr
+    doc = json.loads((fixed / "gap-analysis.json").read_text())
+    (row,) = doc["rows"]
+    assert row["fit_range_source"] == "--fit-range" and row["fit_range_qualified"] is None
+    assert (row["fit_range_x_min"], row["fit_range_x_max"]) == (0.002, 0.05)
+    assert doc["fit_range"]["option"] == [0.002, 0.05]
+    assert reversed_.returncode == 2 and "--fit-range LO HI needs LO < HI" in reversed_.stderr

@@ -8,8 +8,9 @@ Only re-draws what petgap-post computed (its gap-analysis.json: per step the his
 ``petgap.analysis.collapse``: x = g / g0, y = 3 g0 (1 - c) density / (2 pi c).  Colour
 marks lambda_max / lambda_min, filled symbols lambda_min = 32 a0, open symbols 128 a0, as
 in the paper.  Bins holding fewer than --min-count pixels (default 10) are left out.
-(petgap-post's own fig2-gap-distribution.png draws the same points, but
-colours each file separately and labels lambda_min only through the fill.)
+(petgap-post's own fig2-gap-distribution.png draws the same points, one panel per call,
+colouring each file separately; its labels name lambda_min, and lambda_max / lambda_min and
+L / lambda_max where the files differ.)
 """
 import argparse
 import json
