@@ -24,7 +24,7 @@ and the grid's FFT buffers are used as scratch.
 """
 import numpy as np
 
-from ._fftw_mpi import multiply_by_qpower, weighted_power
+from ._fftw_mpi import weighted_power
 
 
 class ElasticHalfSpace:
@@ -52,9 +52,7 @@ class ElasticHalfSpace:
     def _apply(self, field, scale, power, out):
         grid = self.grid
         np.copyto(grid.real, field)
-        grid.forward()
-        multiply_by_qpower(grid.fourier, grid.qx, grid.qy, scale, power)
-        grid.backward()
+        grid.convolve_qpower(scale, power)
         if out is None:
             return grid.real.copy()
         np.copyto(out, grid.real)
@@ -66,13 +64,9 @@ class ElasticHalfSpace:
         For solvers that fill the FFT buffer in a fused pass of their own and
         read the result straight from it: no copies in or out.
         """
-        grid = self.grid
-        grid.forward()
         if inverse:
-            multiply_by_qpower(grid.fourier, grid.qx, grid.qy, self._compliance, -1)
-        else:
-            multiply_by_qpower(grid.fourier, grid.qx, grid.qy, self._stiffness, 1)
-        return grid.backward()
+            return self.grid.convolve_qpower(self._compliance, -1)
+        return self.grid.convolve_qpower(self._stiffness, 1)
 
     def pressure(self, displacement, out=None):
         """Zero-mean pressure ``p = K u`` that holds the displacement ``u``.

@@ -101,6 +101,9 @@ class Grid:
             self._load_wisdom()
         self._plans = _fftw_mpi.SlabPlans(self.comm, nx, ny, self._real_storage,
                                           self._fourier_storage, planner)
+        self._convolution = _fftw_mpi.ConvolutionPlans(self.comm, nx, ny, ln0, ln1,
+                                                       self._real_storage,
+                                                       self._fourier_storage, planner)
         if wisdom and planner != "estimate":
             self._save_wisdom()
 
@@ -164,6 +167,23 @@ class Grid:
             np.copyto(self.real, field)
         self._plans.forward()
         return self.fourier
+
+    def convolve_qpower(self, scale, power):
+        """``real <- F^{-1}[scale |q|^power F real]`` in place, the q = 0 mode zeroed.
+
+        The Fourier multiplier of the elastic operators (``power`` +1 for the
+        stiffness, -1 for the compliance), fused with the transforms so that the
+        Fourier slab is swept once (see :class:`petgap._fftw_mpi.ConvolutionPlans`).
+        ``F^{-1}`` is unnormalised, as in :meth:`backward`: ``scale`` must carry
+        the ``1 / (nx ny)``.  :attr:`fourier` is used as scratch.
+
+        Returns
+        -------
+        ndarray
+            :attr:`real`.
+        """
+        self._convolution.apply(self.qx, self.qy, scale, power)
+        return self.real
 
     def backward(self):
         """Inverse FFT of :attr:`fourier` into :attr:`real`, *without* the ``1/(nx ny)``.
