@@ -10,7 +10,10 @@ N x N field:
 * petgap's own pair: ``Grid((N, N), planner="measure")``, ``grid.forward()`` then
   ``grid.backward()`` on the grid's own buffers, timed exactly as fft_limit.c
   does (barrier, MPI_Wtime, pair, barrier), median of ``--repeats`` pairs after
-  ``--warmup`` untimed pairs, run under ``mpirun -n P``.
+  ``--warmup`` untimed pairs, run under ``mpirun -n P``; and, in the same
+  process, one application of the elastic operator as the solvers make it
+  (``ElasticHalfSpace.apply_in_buffer``: the transforms fused with the Fourier
+  multiplier, ``Grid.convolve_qpower``), timed the same way.
 
 The order of the two alternates between rounds, so that slow drifts of a noisy
 machine hit both alike.  Printed: a markdown table of the medians over rounds of
@@ -42,6 +45,7 @@ def worker(n, repeats, warmup):
     import numpy as np
     from mpi4py import MPI
 
+    from petgap.elastic import ElasticHalfSpace
     from petgap.grid import Grid
     comm = MPI.COMM_WORLD
     grid = Grid((n, n), comm=comm, planner="measure")
@@ -61,24 +65,35 @@ def worker(n, repeats, warmup):
         comm.Barrier()
         times.append(MPI.Wtime() - t0)
     times.sort()
+    half_space = ElasticHalfSpace(grid, 1.0)
+    applies = []
+    for k in range(warmup + repeats):
+        comm.Barrier()
+        t0 = MPI.Wtime()
+        half_space.apply_in_buffer(inverse=k % 2 == 0)
+        comm.Barrier()
+        if k >= warmup:
+            applies.append(MPI.Wtime() - t0)
+    applies.sort()
     if comm.rank == 0:
-        print(f"petgap N={n} ranks={comm.size} median_pair_s={times[len(times) // 2]:.6f}",
-              flush=True)
+        print(f"petgap N={n} ranks={comm.size} median_pair_s={times[len(times) // 2]:.6f} "
+              f"median_apply_s={applies[len(applies) // 2]:.6f}", flush=True)
 
 
-def _median_from(output, what):
-    m = re.search(r"median_pair_s=([0-9.eE+-]+)", output)
+def _median_from(output, what, key="median_pair_s"):
+    m = re.search(key + r"=([0-9.eE+-]+)", output)
     if not m:
         raise RuntimeError(f"no median in the output of {what}:\n{output}")
     return float(m.group(1))
 
 
-def _run(cmd, what, env=None, attempts=2):
+def _run(cmd, what, env=None, attempts=2, keys=("median_pair_s",)):
     """Run a measurement; on failure show its output and try once more."""
     for attempt in range(attempts):
         out = subprocess.run(cmd, capture_output=True, text=True, timeout=900, env=env)
         if out.returncode == 0:
-            return _median_from(out.stdout, what)
+            values = [_median_from(out.stdout, what, key) for key in keys]
+            return values[0] if len(values) == 1 else values
         print(f"# {what} failed (exit {out.returncode}, attempt {attempt + 1}):\n"
               f"{out.stdout}{out.stderr}", file=sys.stderr, flush=True)
     raise RuntimeError(f"{what} failed {attempts} times: {shlex.join(cmd)}")
@@ -93,11 +108,12 @@ def run_petgap(n, ranks, repeats, warmup, wisdom="cached"):
     cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", sys.executable, str(Path(__file__)),
            "--worker", str(n), "--repeats", str(repeats), "--warmup", str(warmup)]
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    keys = ("median_pair_s", "median_apply_s")
     if wisdom == "fresh":
         with tempfile.TemporaryDirectory(prefix="petgap-wisdom-") as empty:
             env["PETGAP_WISDOM_DIR"] = empty
-            return _run(cmd, "the petgap worker", env=env)
-    return _run(cmd, "the petgap worker", env=env)
+            return _run(cmd, "the petgap worker", env=env, keys=keys)
+    return _run(cmd, "the petgap worker", env=env, keys=keys)
 
 
 def main():
@@ -122,27 +138,31 @@ def main():
           f"run, petgap wisdom {args.wisdom}", file=sys.stderr)
     for n in args.sizes:
         for ranks in args.ranks:
-            limit, ours = [], []
+            limit, ours, apply = [], [], []
             for k in range(args.rounds):
                 order = (0, 1) if k % 2 == 0 else (1, 0)
                 for which in order:
                     if which == 0:
                         limit.append(run_fft_limit(n, ranks, args.repeats))
                     else:
-                        ours.append(run_petgap(n, ranks, args.repeats, args.warmup,
-                                               args.wisdom))
+                        pair, op = run_petgap(n, ranks, args.repeats, args.warmup,
+                                              args.wisdom)
+                        ours.append(pair)
+                        apply.append(op)
                 print(f"# N={n} ranks={ranks} round {k}: fft_limit {limit[-1]:.4f} s, "
-                      f"petgap {ours[-1]:.4f} s", file=sys.stderr, flush=True)
-            a, b = statistics.median(limit), statistics.median(ours)
-            rows.append((n, ranks, a, b, b / a, min(limit), min(ours)))
+                      f"petgap pair {ours[-1]:.4f} s, operator {apply[-1]:.4f} s",
+                      file=sys.stderr, flush=True)
+            a, b, c = (statistics.median(v) for v in (limit, ours, apply))
+            rows.append((n, ranks, a, b, b / a, c, c / a, min(limit), min(ours)))
     print(f"# done {time.strftime('%H:%M')}, load average {os.getloadavg()[0]:.2f}",
           file=sys.stderr)
 
-    print("| N | ranks | fft_limit median s | petgap median s | ratio | "
-          "fft_limit best s | petgap best s |")
-    print("|---|---|---|---|---|---|---|")
-    for n, ranks, a, b, r, amin, bmin in rows:
-        print(f"| {n} | {ranks} | {a:.4f} | {b:.4f} | {r:.2f} | {amin:.4f} | {bmin:.4f} |")
+    print("| N | ranks | fft_limit median s | petgap pair median s | ratio | "
+          "operator application median s | ratio | fft_limit best s | petgap pair best s |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for n, ranks, a, b, r, c, rc, amin, bmin in rows:
+        print(f"| {n} | {ranks} | {a:.4f} | {b:.4f} | {r:.2f} | {c:.4f} | {rc:.2f} | "
+              f"{amin:.4f} | {bmin:.4f} |")
 
 
 if __name__ == "__main__":
