@@ -289,3 +289,18 @@ def recurrence(double[:, ::1] u, const double[:, ::1] pad, double tau, double sc
             rr = &pad[i, 0]
             for j in range(n):
                 ur[j] = scale * (ur[j] - tau * rr[j])
+
+
+def overlap_sums(const double[:, ::1] h, double level):
+    """Returns ``(sum max(h - level, 0), count(h > level))``: a rigid approach's overlap."""
+    cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1]
+    cdef double v, s = 0.0
+    cdef long count = 0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                v = h[i, j] - level
+                if v > 0.0:
+                    s += v
+                    count += 1
+    return s, count

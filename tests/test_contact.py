@@ -601,3 +601,25 @@ def test_contact_set_merge_and_overlap_collection():
     big = np.empty(count, dtype=np.int64)
     assert cs.collect_overlap(u, h, mask, 0.0, big) == count
     np.testing.assert_array_equal(big, truth)
+
+
+@pytest.mark.parametrize("load", [1e-4, 0.002, 50.0])
+def test_rigid_cold_start_carries_the_load(comm, load):
+    """The cold start of load control: a rigid approach with mean pressure = load.
+
+    Newton on the overlap must hit the load exactly; a small load puts the
+    initial contact set on the summits only (not everywhere, as a uniform
+    pressure would), and a load beyond full overlap puts every point in it.
+    """
+    from petgap.polonsky_keer import _rigid_pressure
+
+    grid = Grid((64, 48), comm=comm)
+    h = self_affine(grid, 0.8, 8.0, 32.0, rms_slope=0.1, seed=5)
+    problem = ContactProblem(grid, h, ElasticHalfSpace(grid, 1.0))
+    p = _rigid_pressure(problem, load)
+    assert grid.mean(p) == pytest.approx(load, rel=1e-10)
+    fraction = grid.sum((p > 0).astype(float)) / grid.npoints
+    if load < 0.01:
+        assert 0 < fraction < 0.2
+    else:
+        assert fraction == 1.0
