@@ -286,18 +286,25 @@ def _run_steps(scene, grid, topography, stats, output, petsc_args, log, resume):
 
 
 class _SavedState:
-    """A completed step read back from the file: enough to warm-start and chain."""
+    """A completed step read back from the file: enough to warm-start and chain.
 
-    def __init__(self, gap, pressure, attrs, control):
+    ``zero_gap_fraction`` (what :func:`petgap.solver.annotate_step` compares) is
+    the stored attribute, else (a file written before petgap stored it) counted
+    from the stored gap, else None: the next step is then not judged for a jump.
+    """
+
+    def __init__(self, gap, pressure, attrs, control, zero_gap_fraction=None):
         self.gap, self.pressure, self.control = gap, pressure, control
         self.mean_gap = attrs["solution.mean_gap"]
         self.mean_pressure = attrs["solution.mean_pressure"]
         self.contact_fraction = attrs["solution.contact_fraction"]
+        self.zero_gap_fraction = attrs.get("solution.zero_gap_fraction", zero_gap_fraction)
         self.summary = {k[len("solution."):]: v for k, v in attrs.items()
                         if k.startswith("solution.")}
 
 
 def _read_step(result, index, grid, fields):
+    import numpy as np
     from .contact import Load, MeanGap
     group = result.step(index)
     attrs = result.attrs(group)
@@ -305,9 +312,12 @@ def _read_step(result, index, grid, fields):
     control = Load(value) if kind == "load" else MeanGap(value)
     gap = result.read_field("gap", grid, group=group) if "gap" in group else None
     pressure = result.read_field("pressure", grid, group=group) if "pressure" in group else None
+    zero_gap = None
+    if "solution.zero_gap_fraction" not in attrs and gap is not None:
+        zero_gap = grid.comm.allreduce(int(np.count_nonzero(gap <= 0))) / grid.npoints
     if gap is None or pressure is None:
         gap = pressure = None  # no fields to warm-start from: the next step starts cold
-    return _SavedState(gap, pressure, attrs, control)
+    return _SavedState(gap, pressure, attrs, control, zero_gap)
 
 
 class _hold_sigterm:

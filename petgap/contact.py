@@ -61,7 +61,15 @@ class ContactSolution:
     """A solved (or not) contact state and how it was reached.
 
     Fields are this rank's slabs; scalars are global.  Contact (``A_rep``) is
-    repulsive contact: zero gap and compressive pressure.  Forces are per cell:
+    repulsive contact: zero gap and compressive pressure.  ``zero_gap_fraction``
+    is the area fraction at the wall (``g <= 0``, i.e. ``g = 0`` in a stored
+    state), whether the wall pushes there (the ``contact_fraction``) or adhesion
+    holds the surfaces together under tension (``p < 0``): for the hard wall the
+    two differ only by points that touch without load, but a JKR-like contact
+    has tensile edges, and near pull-off under mean-gap control it may be all
+    tension (``contact_fraction = 0``) while still stuck; it is this area that
+    vanishes at pull-off, and that :func:`petgap.solver.annotate_step` watches
+    for jumps.  Forces are per cell:
     ``repulsive_force`` is the hard-wall reaction ``sum dx dy (p + v'(0))`` over
     the points at the wall, ``attractive_force = -sum dx dy v'(g)`` over all
     points (the paper's Eq. 15, negative when attractive); their sum is
@@ -81,6 +89,7 @@ class ContactSolution:
     mean_gap: float
     mean_pressure: float
     contact_fraction: float
+    zero_gap_fraction: float
     elastic_energy: float
     interaction_energy: float
     kappa_rep: float
@@ -104,11 +113,11 @@ class ContactSolution:
     def scalars(self):
         """The scalar results as a flat dict (for HDF5 attributes and tables)."""
         out = {k: getattr(self, k) for k in (
-            "mean_gap", "mean_pressure", "contact_fraction", "elastic_energy",
-            "interaction_energy", "kappa_rep", "repulsive_force", "attractive_force",
-            "attractive_fraction", "inv_kappa_att", "kkt_pressure", "kkt_gap", "converged",
-            "reason", "solver", "iterations", "operator_applications", "wall_time",
-            "direction", "jump", "negative_curvature_steps")}
+            "mean_gap", "mean_pressure", "contact_fraction", "zero_gap_fraction",
+            "elastic_energy", "interaction_energy", "kappa_rep", "repulsive_force",
+            "attractive_force", "attractive_fraction", "inv_kappa_att", "kkt_pressure",
+            "kkt_gap", "converged", "reason", "solver", "iterations", "operator_applications",
+            "wall_time", "direction", "jump", "negative_curvature_steps")}
         out["control"] = self.control.kind
         out["control_value"] = self.control.value
         return out
@@ -228,11 +237,12 @@ class ContactProblem:
             self.kkt_residuals(gap, pressure, contact)
         interaction = self.interaction
         # Sums over the slab in row blocks: no full-size temporaries at the peak.
-        local = np.zeros(7)
+        local = np.zeros(8)
         for rows in _blocks(gap.shape[0]):
             g, p, c = gap[rows], pressure[rows], contact[rows]
             repulsive = c & (p > 0)
             local[:3] += (g.sum(), p.sum(), np.count_nonzero(repulsive))
+            local[7] += np.count_nonzero(g <= 0)
             if interaction.adhesive:
                 stress = interaction.derivative(g)          # v'(g) >= 0, tensile
                 local[3] += interaction.energy(g).sum()
@@ -260,7 +270,8 @@ class ContactProblem:
                          else float("nan"))
         return ContactSolution(
             gap=gap, pressure=pressure, control=control, mean_gap=mean_gap,
-            mean_pressure=mean_pressure, contact_fraction=c, elastic_energy=elastic,
+            mean_pressure=mean_pressure, contact_fraction=c, zero_gap_fraction=total[7] / n,
+            elastic_energy=elastic,
             interaction_energy=area * total[3], kappa_rep=kappa,
             repulsive_force=repulsive_force, attractive_force=attractive_force,
             attractive_fraction=total[6] / n, inv_kappa_att=inv_kappa_att,
