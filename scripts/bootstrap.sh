@@ -4,9 +4,14 @@
 # with system site packages (petsc4py, mpi4py, h5py-mpi come from Debian), and
 # petgap built in place with its FFTW-MPI binding.  Source it: it exports the
 # environment that mpirun and petgap need (PATH, Open MPI's run-as-root switch).
-set -euo pipefail
+# The set-up runs in a subshell with `set -euo pipefail`, so that sourcing this
+# file leaves the caller's shell options as they were (an interactive shell with
+# `set -e` would close on the first failing command).
 PETGAP_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 PETGAP_VENV=${PETGAP_VENV:-$PETGAP_ROOT/.venv}
+
+_petgap_setup() (
+set -euo pipefail
 
 packages=(python3-petsc4py python3-mpi4py python3-h5py-mpi libfftw3-mpi-dev libfftw3-dev
           openmpi-bin libopenmpi-dev python3-numpy python3-scipy python3-matplotlib
@@ -40,9 +45,16 @@ stamp="$PETGAP_VENV/.petgap-build-stamp"
 if [ ! -f "$stamp" ] || [ -n "$(find "$PETGAP_ROOT/setup.py" "$PETGAP_ROOT/petgap" -name '*.pyx' -newer "$stamp" -o -name setup.py -newer "$stamp" | head -n 1)" ] \
    || ! "$PETGAP_VENV/bin/python" -c 'import petgap._fftw_mpi' 2>/dev/null; then
   echo "petgap setup: building petgap" >&2
-  (cd "$PETGAP_ROOT" && "$PETGAP_VENV/bin/pip" install --no-build-isolation --no-deps -q -e . >&2)
+  (cd "$PETGAP_ROOT" && "$PETGAP_VENV/bin/python" -m pip install --no-build-isolation --no-deps -q -e . >&2)
   touch "$stamp"
 fi
+)
+if ! _petgap_setup; then
+  echo "petgap setup failed (see the messages above)" >&2
+  unset -f _petgap_setup
+  return 1 2>/dev/null || exit 1
+fi
+unset -f _petgap_setup
 
 export PATH="$PETGAP_VENV/bin:$PATH"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
