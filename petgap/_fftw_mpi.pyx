@@ -115,6 +115,13 @@ def import_wisdom(MPI.Comm comm, text):
     return bool(ok)
 
 
+cdef inline void _destroy(fftw_plan *plan):
+    """Destroy a plan that may never have been made, and forget it."""
+    if plan[0] != NULL:
+        fftw_destroy_plan(plan[0])
+        plan[0] = NULL
+
+
 cdef class SlabPlans:
     """Forward r2c and backward c2r FFTW-MPI plans on two caller-owned buffers.
 
@@ -171,10 +178,8 @@ cdef class SlabPlans:
             fftw_execute(self.bwd)
 
     def __dealloc__(self):
-        if self.fwd != NULL:
-            fftw_destroy_plan(self.fwd)
-        if self.bwd != NULL:
-            fftw_destroy_plan(self.bwd)
+        _destroy(&self.fwd)
+        _destroy(&self.bwd)
 
 
 cdef class ConvolutionPlans:
@@ -303,18 +308,12 @@ cdef class ConvolutionPlans:
             fftw_execute(self.rows_bwd)
 
     def __dealloc__(self):
-        if self.rows_fwd != NULL:
-            fftw_destroy_plan(self.rows_fwd)
-        if self.rows_bwd != NULL:
-            fftw_destroy_plan(self.rows_bwd)
-        if self.transpose_fwd != NULL:
-            fftw_destroy_plan(self.transpose_fwd)
-        if self.transpose_bwd != NULL:
-            fftw_destroy_plan(self.transpose_bwd)
-        if self.line_fwd != NULL:
-            fftw_destroy_plan(self.line_fwd)
-        if self.line_bwd != NULL:
-            fftw_destroy_plan(self.line_bwd)
+        _destroy(&self.rows_fwd)
+        _destroy(&self.rows_bwd)
+        _destroy(&self.transpose_fwd)
+        _destroy(&self.transpose_bwd)
+        _destroy(&self.line_fwd)
+        _destroy(&self.line_bwd)
         if self.line != NULL:
             fftw_free(self.line)
 

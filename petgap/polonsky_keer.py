@@ -137,14 +137,13 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
 
     # The contact set S = {p > 0} as sorted index lists, with p and the
     # conjugate direction t stored on S only (see petgap/_contact_set.pyx).
-    mask = np.ascontiguousarray(p > 0, dtype=np.uint8)
+    mask = np.zeros(grid.local_shape, dtype=np.uint8)
     padded = grid._padded
     padded_width = padded.shape[1]
-    idx, pidx, pS, tS = _cs.merge(_EMPTY_INDEX, _EMPTY, _EMPTY, np.flatnonzero(mask),
-                                  p.ravel()[mask.ravel() > 0], np.zeros_like(mask), padded_width)
-    mask[...] = 0
-    mask.ravel()[idx] = 1
-    del p
+    start = np.flatnonzero(p > 0)
+    idx, pidx, pS, tS = _cs.merge(_EMPTY_INDEX, _EMPTY, _EMPTY, start, p.ravel()[start], mask,
+                                  padded_width)
+    del p, start
     gS, zS = np.empty_like(pS), np.empty_like(pS)
     overlap = np.empty(max(1024, n // (100 * comm.size)), dtype=np.int64)
     u = np.empty(grid.local_shape)
