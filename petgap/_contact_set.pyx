@@ -146,9 +146,8 @@ def collect_overlap(const double[:, ::1] u, const double[:, ::1] h,
     return count
 
 
-def gather_sums(const double[:, ::1] pad, const long[::1] pidx, const double[::1] gS,
-                double[::1] zS):
-    """``zS = pad`` on S; returns ``(sum zS, sum gS zS)``."""
+def gather_sums(const double[:, ::1] pad, const long[::1] pidx, const double[::1] gS):
+    """Returns ``(sum z, sum gS z)`` over S with ``z = pad`` (the preconditioned gap)."""
     cdef Py_ssize_t k, ns = pidx.shape[0]
     cdef double z, sz = 0.0, sgz = 0.0
     cdef const double *pf
@@ -158,7 +157,6 @@ def gather_sums(const double[:, ::1] pad, const long[::1] pidx, const double[::1
     with nogil:
         for k in range(ns):
             z = pf[pidx[k]]
-            zS[k] = z
             sz += z
             sgz += gS[k] * z
     return sz, sgz
@@ -170,6 +168,20 @@ def direction(const double[::1] zS, double zshift, double beta, double[::1] tS):
     with nogil:
         for k in range(ns):
             tS[k] = zS[k] - zshift + beta * tS[k]
+
+
+def direction_from_buffer(const double[:, ::1] pad, const long[::1] pidx, double zshift,
+                          double beta, double[::1] tS):
+    """``tS = (pad - zshift) + beta tS`` on S: :func:`direction` reading ``z`` where
+    the preconditioner left it, so that no vector of S is spent on holding it."""
+    cdef Py_ssize_t k, ns = tS.shape[0]
+    cdef const double *pf
+    if ns == 0:
+        return
+    pf = &pad[0, 0]
+    with nogil:
+        for k in range(ns):
+            tS[k] = pf[pidx[k]] - zshift + beta * tS[k]
 
 
 def step_sums(const double[:, ::1] pad, const long[::1] pidx, const double[::1] gS,
@@ -192,8 +204,11 @@ def step_sums(const double[:, ::1] pad, const long[::1] pidx, const double[::1] 
     return sr, sgt, srt, st
 
 
-def update(double[::1] pS, const double[::1] tS, const double[::1] gS, double tau):
-    """``pS = max(pS - tau tS, 0)``, or ``-tau gS`` where that is <= 0 and ``gS < 0``.
+def update(double[::1] pS, const double[::1] tS, const double[::1] gS, double tau,
+           double entry):
+    """``pS = max(pS - tau tS, 0)``, or ``-entry gS`` where that is <= 0 and ``gS < 0``.
+
+    ``entry`` turns a penetration into a pressure (see :func:`overlap_pressures`).
 
     Returns ``(points of S re-entering by overlap, points of S clipped, sum pS)``.
     """
@@ -207,7 +222,7 @@ def update(double[::1] pS, const double[::1] tS, const double[::1] gS, double ta
                 clipped += 1
                 v = 0.0
                 if gS[k] < 0.0:
-                    v = -tau * gS[k]
+                    v = -entry * gS[k]
                     overlap += 1
             pS[k] = v
             total += v
@@ -215,8 +230,12 @@ def update(double[::1] pS, const double[::1] tS, const double[::1] gS, double ta
 
 
 def overlap_pressures(const double[:, ::1] u, const double[:, ::1] h, const long[::1] points,
-                      double offset, double tau, double[::1] out):
-    """``out = -tau g`` at the overlap points off S, ``g = u - h + offset``; returns the sum."""
+                      double offset, double entry, double[::1] out):
+    """``out = -entry g`` at the overlap points off S, ``g = u - h + offset``; returns the sum.
+
+    ``entry`` has the units of a stiffness (pressure per length): the caller
+    chooses it so that a penetration becomes a pressure of the right scale.
+    """
     cdef Py_ssize_t k, np_ = points.shape[0]
     cdef double v, s = 0.0
     cdef const double *uf
@@ -227,64 +246,80 @@ def overlap_pressures(const double[:, ::1] u, const double[:, ::1] h, const long
     hf = &h[0, 0]
     with nogil:
         for k in range(np_):
-            v = -tau * (uf[points[k]] - hf[points[k]] + offset)
+            v = -entry * (uf[points[k]] - hf[points[k]] + offset)
             out[k] = v
             s += v
     return s
 
 
-def merge(const long[::1] idx, const double[::1] pS, const double[::1] tS,
+def merge(long[::1] idx, long[::1] pidx, double[::1] pS, double[::1] tS, Py_ssize_t size,
           const long[::1] added, const double[::1] added_p, unsigned char[:, ::1] mask,
           Py_ssize_t padded_width):
-    """The new contact set: points of S with ``pS > 0`` merged with the added points.
+    """The new contact set, in place: points of S with ``pS > 0`` merged with the added points.
 
-    ``added`` (sorted, disjoint from S) enter with pressure ``added_p`` and a zero
-    direction.  ``mask`` is updated in place.  Returns ``(idx, pidx, pS, tS)``.
+    ``idx, pidx, pS, tS`` are buffers whose first ``size`` entries hold S; their
+    length must be at least the number of points kept plus the number of added
+    points with a positive pressure (``size + len(added)`` always suffices).  ``added`` (sorted, disjoint from S) enter with pressure
+    ``added_p`` (those with ``added_p <= 0`` stay out) and a zero direction.
+    ``mask`` is updated.  Returns the new size.
+
+    Working in place is what keeps the set's memory to one copy: S is first
+    compacted forwards (the write position never passes the read position),
+    then merged with the added points backwards from the new end (the write
+    position never falls below the unread part of S).
     """
-    cdef Py_ssize_t ns = idx.shape[0], na = added.shape[0]
-    cdef Py_ssize_t n = mask.shape[1], a = 0, k = 0, out = 0, kept = 0
+    cdef Py_ssize_t ns = size, na = added.shape[0]
+    cdef Py_ssize_t n = mask.shape[1], a, k, kept = 0, w, extra = 0
     cdef unsigned char *mf
+    cdef long point
+    for k in range(na):
+        if added_p[k] > 0.0:
+            extra += 1
+    if ns > pS.shape[0]:
+        raise ValueError(f"contact-set size {ns} exceeds its buffers ({pS.shape[0]})")
     for k in range(ns):
         if pS[k] > 0.0:
             kept += 1
-    for k in range(na):
-        if added_p[k] > 0.0:
-            kept += 1
-    new_idx = np.empty(kept, dtype=np.int64)
-    new_pidx = np.empty(kept, dtype=np.int64)
-    new_p = np.empty(kept, dtype=float)
-    new_t = np.empty(kept, dtype=float)
-    cdef long[::1] ni = new_idx, npi = new_pidx
-    cdef double[::1] npv = new_p, ntv = new_t
-    cdef long point
+    if kept + extra > idx.shape[0] or not (
+            pidx.shape[0] == pS.shape[0] == tS.shape[0] == idx.shape[0]):
+        raise ValueError(f"contact-set buffers of length {idx.shape[0]} cannot hold "
+                         f"{kept} + {extra} points")
+    kept = 0
     if mask.shape[0] == 0:
-        return new_idx, new_pidx, new_p, new_t
+        return 0
     mf = &mask[0, 0]
     with nogil:
-        k = 0
-        while k < ns or a < na:
-            if a >= na or (k < ns and idx[k] < added[a]):
-                point = idx[k]
-                if pS[k] > 0.0:
-                    ni[out] = point
-                    npv[out] = pS[k]
-                    ntv[out] = tS[k]
-                    out += 1
-                else:
-                    mf[point] = 0
-                k += 1
+        for k in range(ns):
+            if pS[k] > 0.0:
+                idx[kept] = idx[k]
+                pS[kept] = pS[k]
+                tS[kept] = tS[k]
+                kept += 1
+            else:
+                mf[idx[k]] = 0
+        k = kept - 1
+        a = na - 1
+        w = kept + extra - 1
+        while w > k:
+            if added_p[a] <= 0.0:
+                a -= 1
+                continue
+            if k >= 0 and idx[k] > added[a]:
+                idx[w] = idx[k]
+                pS[w] = pS[k]
+                tS[w] = tS[k]
+                k -= 1
             else:
                 point = added[a]
-                if added_p[a] > 0.0:
-                    ni[out] = point
-                    npv[out] = added_p[a]
-                    ntv[out] = 0.0
-                    mf[point] = 1
-                    out += 1
-                a += 1
-        for k in range(out):
-            npi[k] = ni[k] + (ni[k] // n) * (padded_width - n)
-    return new_idx, new_pidx, new_p, new_t
+                idx[w] = point
+                pS[w] = added_p[a]
+                tS[w] = 0.0
+                mf[point] = 1
+                a -= 1
+            w -= 1
+        for k in range(kept + extra):
+            pidx[k] = idx[k] + (idx[k] // n) * (padded_width - n)
+    return kept + extra
 
 
 def recurrence(double[:, ::1] u, const double[:, ::1] pad, double tau, double scale):
@@ -298,18 +333,3 @@ def recurrence(double[:, ::1] u, const double[:, ::1] pad, double tau, double sc
             rr = &pad[i, 0]
             for j in range(n):
                 ur[j] = scale * (ur[j] - tau * rr[j])
-
-
-def overlap_sums(const double[:, ::1] h, double level):
-    """Returns ``(sum max(h - level, 0), count(h > level))``: a rigid approach's overlap."""
-    cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1]
-    cdef double v, s = 0.0
-    cdef long count = 0
-    with nogil:
-        for i in range(m):
-            for j in range(n):
-                v = h[i, j] - level
-                if v > 0.0:
-                    s += v
-                    count += 1
-    return s, count

@@ -87,6 +87,23 @@ class ElasticHalfSpace:
         """
         return self._apply(pressure, self._compliance, -1, out)
 
+    def point_stiffness(self):
+        """The diagonal of ``K``: the pressure at a point per unit displacement of it alone.
+
+        ``(1 / N) sum_q E* |q| / 2`` (the ``q = 0`` term is zero), about
+        ``1.2 E* / a0`` on a square grid.  Solvers that work in pressure but
+        meet a penetration ``g`` (a length) use ``k g`` as the pressure scale
+        of that point, so that their steps do not depend on the unit system.
+        Collective: every rank must call it; computed once and cached.
+        """
+        if getattr(self, "_point_stiffness", None) is None:
+            grid = self.grid
+            local = sum(float(w) * float(np.hypot(grid.qx, qy).sum())
+                        for w, qy in zip(grid.hermitian_weight, grid.qy))
+            total = grid.comm.allreduce(local)
+            self._point_stiffness = self._stiffness * total
+        return self._point_stiffness
+
     def energy(self, displacement):
         """Elastic energy ``(1/2) sum_x dx dy p(x) u(x)`` of a displacement (all ranks)."""
         grid = self.grid

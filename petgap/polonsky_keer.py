@@ -34,12 +34,21 @@ point enters), ``K^{-1} p`` follows ``p`` by the conjugate-gradient recurrence
 transform is forced every 50 such steps and before any verdict, so round-off
 cannot accumulate into the answer.
 
-The contact set is stored as sorted index lists, with the pressure and the
-conjugate direction kept on it only (``petgap/_contact_set.pyx``): at a few
-percent contact an iteration then streams the slab through memory once (the
-gap pass) besides the transforms, instead of half a dozen times.  The
-displacement ``u = K^{-1} p`` is the one full field kept between iterations;
-the gap ``g = u - h + d`` is recomputed where it is needed.
+The contact set is stored as sorted index lists, with the pressure, the
+conjugate direction and the gap kept on it only (:mod:`petgap.contact_set`,
+kernels in ``petgap/_contact_set.pyx``): at a few percent contact an iteration
+then streams the slab through memory once (the gap pass) besides the
+transforms, instead of half a dozen times.  The displacement ``u = K^{-1} p``
+is the one full field kept between iterations; the gap ``g = u - h + d`` is
+recomputed where it is needed, and the preconditioned gap is read from the FFT
+buffer where the transform left it.
+
+Cold start under load control: a uniform pressure, so the first iterations
+work on every point and the set shrinks from there; it is updated in place,
+so its peak is one copy of the whole slab's set (40 bytes per point).  A
+start nearer the answer (the rigid approach carrying the load) saved 5-15 %
+of the iterations but did not converge on some surfaces (see the comment in
+:func:`polonsky_keer`).
 
 Convergence is judged at the start of an iteration, on the pair ``(p, g)`` the
 iteration starts from, by the gap residual of
@@ -51,10 +60,7 @@ from mpi4py import MPI
 
 from . import _contact_set as _cs
 from .contact import Load, MeanGap, Timer
-
-
-_EMPTY = np.empty(0)
-_EMPTY_INDEX = np.empty(0, dtype=np.int64)
+from .contact_set import ContactSet
 
 
 def _sums(comm, *values):
@@ -64,8 +70,7 @@ def _sums(comm, *values):
 
 
 def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
-                  initial_pressure=None, monitor=None, preconditioned=True,
-                  cold_start="uniform"):
+                  initial_pressure=None, monitor=None, preconditioned=True):
     """Solve non-adhesive contact under load or mean-gap control.
 
     Parameters
@@ -83,13 +88,6 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     preconditioned : bool
         Precondition the conjugate gradients with the stiffness restricted to
         the contact set, ``z = P_S K P_S g`` (see the module docstring).
-    cold_start : {"uniform", "rigid"}
-        Load control without ``initial_pressure``: a uniform pressure (every
-        point in the initial contact set), or :func:`_rigid_pressure`.  The
-        rigid start needs fewer iterations and less memory at 512^2-4096^2,
-        but on the GUIDE surface at 8192^2 it stalled (residual about 2.5 after
-        670 iterations) where the uniform start converges in 154, so it is not
-        the default until that is understood.
 
     Returns
     -------
@@ -119,32 +117,36 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         raise TypeError(f"unknown control {control!r}")
 
     start_ops = problem.operator_applications
-    if initial_pressure is not None:
-        p = np.maximum(np.asarray(initial_pressure, dtype=float), 0.0)
-    elif load and cold_start == "rigid":
-        p = _rigid_pressure(problem, target)
-    elif load:
-        p = np.full(grid.local_shape, target)
-    else:
-        # Rigid approach: pressure where the undeformed surfaces overlap.
-        overlap = h - problem.mean_height - target
-        p = np.maximum(overlap, 0.0) * (problem.pressure_scale / problem.gap_scale)
-    if load:
-        p *= target / grid.mean(p) if grid.mean(p) > 0 else 1.0
-        if grid.mean(p) <= 0:
-            p[...] = target
-    offset = problem.mean_height + target if not load else 0.0
-
     # The contact set S = {p > 0} as sorted index lists, with p and the
-    # conjugate direction t stored on S only (see petgap/_contact_set.pyx).
+    # conjugate direction t stored on S only (see petgap/contact_set.py).
     mask = np.zeros(grid.local_shape, dtype=np.uint8)
     padded = grid._padded
     padded_width = padded.shape[1]
-    start = np.flatnonzero(p > 0)
-    idx, pidx, pS, tS = _cs.merge(_EMPTY_INDEX, _EMPTY, _EMPTY, start, p.ravel()[start], mask,
-                                  padded_width)
-    del p, start
-    gS, zS = np.empty_like(pS), np.empty_like(pS)
+    offset = problem.mean_height + target if not load else 0.0
+    if initial_pressure is not None or not load:
+        if initial_pressure is not None:
+            p = np.maximum(np.asarray(initial_pressure, dtype=float), 0.0)
+        else:
+            # Mean-gap control: pressure where the undeformed surfaces overlap.
+            p = np.maximum(h - offset, 0.0) * (problem.pressure_scale / problem.gap_scale)
+        if load:
+            mean = grid.mean(p)
+            if mean > 0:
+                p *= target / mean
+            else:
+                p[...] = target
+        contact = ContactSet.from_pressure(mask, padded_width, p)
+        del p
+    else:
+        # Load control from a uniform pressure: every point starts in S, which
+        # then shrinks to the points that carry the load.  Robust where starts
+        # nearer the answer are not: a rigid approach with a local contact
+        # stiffness overshoots the long wavelengths (the compliance 2 / (E* q)
+        # is large there), so the first displacement makes whole valleys
+        # penetrate; their entering pressures, rescaled to the load, then crush
+        # the summits, and the set oscillated at 20-60 % of the points without
+        # converging (seen at 1024^2 and 8192^2).
+        contact = ContactSet.everywhere(mask, padded_width, target)
     overlap = np.empty(max(1024, n // (100 * comm.size)), dtype=np.int64)
     u = np.empty(grid.local_shape)
     half_space = problem.half_space
@@ -154,8 +156,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     history = []
     converged, reason, it = False, "max_iterations", 0
     for it in range(max_iterations + 1):
-        if len(gS) != len(pS):
-            gS, zS = np.empty_like(pS), np.empty_like(pS)
+        idx, pidx, pS, tS, gS = contact.idx, contact.pidx, contact.p, contact.t, contact.g
         if fresh:
             # u = K^{-1} p from scratch: one transform pair
             if scale != 1.0:
@@ -204,9 +205,9 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             g.ravel()[idx] = 0.0
             points = np.flatnonzero(g < 0)
             extra = -g.ravel()[points] * (problem.pressure_scale / problem.gap_scale)
-            idx, pidx, pS, tS = _cs.merge(idx, pS, tS, points, extra, mask, padded_width)
-            del g
-            scale = target * n / _sums(comm, pS.sum())[0] if load else 1.0
+            del g, idx, pidx, pS, tS, gS
+            contact.merge(points, extra)
+            scale = target * n / _sums(comm, contact.p.sum())[0] if load else 1.0
             delta, fresh = 0.0, True
             continue
         if preconditioned:
@@ -214,11 +215,20 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # made zero-mean on S under load control
             half_space.apply_in_buffer(inverse=False)
             problem.operator_applications += 1
-            sum_z, g_norm = _sums(comm, *_cs.gather_sums(padded, pidx, gS, zS))
+            sum_z, gz, g_sq = _sums(comm, *_cs.gather_sums(padded, pidx, gS), g_norm)
             zshift = sum_z / n_contact if load else 0.0
-            _cs.direction(zS, zshift, delta * g_norm / g_old, tS)
+            # Pressure per unit penetration given to entering points (below):
+            # plain Polonsky-Keer steps along the gap, so its step length tau
+            # is a stiffness, the Rayleigh quotient of the compliance's inverse
+            # on the gap; here tau is a pure number and the direction a
+            # pressure, so the same scale is supplied explicitly, as the
+            # Rayleigh quotient (g, K g) / (g, g) of the stiffness on the gap.
+            stiffness = gz / g_sq if g_sq > 0 else 0.0
+            g_norm = gz
+            _cs.direction_from_buffer(padded, pidx, zshift, delta * g_norm / g_old, tS)
         else:
             g_norm = _sums(comm, g_norm)[0]
+            stiffness = 1.0
             _cs.direction(gS, 0.0, delta * g_norm / g_old, tS)
         g_old = g_norm
         # The image r = K^{-1} t of the direction: one transform pair
@@ -232,20 +242,21 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             reason = "breakdown"
             break
         tau = sum_gt / sum_rt
-        entering, clipped, sum_p = _cs.update(pS, tS, gS, tau)
+        entering, clipped, sum_p = _cs.update(pS, tS, gS, tau, tau * stiffness)
         added = overlap[:min(n_over, len(overlap))]
         added_p = np.empty(len(added))
-        sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau, added_p)
+        sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau * stiffness, added_p)
         n_overlap, n_clipped, sum_p = _sums(comm, entering + len(added), clipped, sum_p)
         delta = 0.0 if n_overlap > 0 else 1.0
         scale = target * n / sum_p if load else 1.0
         if clipped or len(added):
-            idx, pidx, pS, tS = _cs.merge(idx, pS, tS, added, added_p, mask, padded_width)
+            del idx, pidx, pS, tS, gS  # views of buffers merge may replace
+            contact.merge(added, added_p)
         # Same contact set, no projection: u follows p linearly, no transform needed.
         fresh = n_overlap > 0 or n_clipped > 0 or since_fresh >= refresh_interval
         if not fresh:
             _cs.recurrence(u, padded, tau, scale)
-            pS *= scale
+            contact.p[...] *= scale
             scale = 1.0
 
     # Residuals are taken on the gap as computed; the stored field (and the
@@ -255,7 +266,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     g -= h
     g += offset - shift
     p = np.zeros(grid.local_shape)
-    p.ravel()[idx] = pS
+    p.ravel()[contact.idx] = contact.p
     contact = mask.astype(bool)
     residuals = problem.kkt_residuals(g, p, contact)
     g[contact] = 0.0
@@ -264,36 +275,6 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         g, p, contact, control, converged=converged, reason=reason,
         solver="pcg-pressure", iterations=it, wall_time=timer(), history=history,
         operator_applications=problem.operator_applications - start_ops, residuals=residuals)
-
-
-def _rigid_pressure(problem, target):
-    """A cold start for load control: the rigid approach that carries the load.
-
-    ``p = k max(h - d, 0)`` with the contact stiffness ``k = h0' E* / h0`` of
-    the control's unit-free measures, and the level ``d`` found by Newton's
-    method so that ``mean(p) = target``.  It puts the initial contact set
-    near the summits that will carry the load, instead of everywhere as a
-    uniform pressure would: the first iterations then work on a contact set
-    of the order of the final one, which keeps the index lists (and the peak
-    memory) small.  Newton from below on the convex, decreasing, piecewise
-    linear ``mean(max(h - d, 0))`` increases monotonically to the root.
-    """
-    grid, comm, h = problem.grid, problem.grid.comm, problem.topography
-    k = problem.pressure_scale / problem.gap_scale
-    wanted = target / k * grid.npoints
-    level = comm.allreduce(float(h.min()) if h.size else np.inf, op=MPI.MIN)
-    total, count = _sums(comm, *_cs.overlap_sums(h, level))
-    if total <= wanted:
-        # Even full overlap carries less: the whole surface is in contact.
-        level = float(problem.mean_height) - target / k
-    for _ in range(100):
-        if count == 0 or total <= wanted * (1 + 1e-12):
-            break
-        level += (total - wanted) / count
-        total, count = _sums(comm, *_cs.overlap_sums(h, level))
-    p = np.maximum(h - level, 0.0)
-    p *= k
-    return p
 
 
 def touching_state(problem, control, timer=None):

@@ -1,0 +1,123 @@
+"""The contact set of the pressure solver: sorted index lists with the fields on them.
+
+:func:`petgap.polonsky_keer.polonsky_keer` keeps the pressure ``p``, its
+conjugate direction ``t`` and the gap ``g`` on the contact set ``S = {p > 0}``
+only, as compressed vectors beside the flat indices of ``S`` in this rank's
+slab (``idx``) and in the padded FFT buffer (``pidx``); the kernels that work on
+them are in ``petgap/_contact_set.pyx``.
+
+Why a class around five arrays: memory.  A cold start from a uniform pressure
+puts every point in ``S``, and the set then shrinks to the few percent that
+carry the load.  The vectors therefore live in buffers with spare capacity,
+updated in place by :func:`petgap._contact_set.merge` (never two copies of the
+set at once), grown one array at a time when points enter beyond the
+capacity, and shrunk one array at a time when the set has fallen well below
+it, so that the peak is one copy of the largest set plus one array in transit.
+"""
+import numpy as np
+
+from . import _contact_set as _cs
+
+_SHRINK_BELOW = 0.25  # shrink when the set fills less than this of its buffers
+_SPARE = 1.5          # capacity given on growing or shrinking, times the set size
+
+
+class ContactSet:
+    """``S`` with ``p`` and ``t`` on it, stored in place (see the module docstring).
+
+    Parameters
+    ----------
+    mask : ndarray of uint8, shape ``grid.local_shape``
+        Set to 1 on ``S`` and 0 elsewhere, and kept so.
+    padded_width : int
+        Row length of the padded FFT buffer, for ``pidx``.
+    """
+
+    _names = ("_idx", "_pidx", "_p", "_t", "_g")
+
+    def __init__(self, mask, padded_width):
+        self.mask, self.padded_width = mask, padded_width
+        self.size = 0
+        mask[...] = 0
+        self._idx = np.empty(0, dtype=np.int64)
+        self._pidx = np.empty(0, dtype=np.int64)
+        self._p, self._t, self._g = np.empty(0), np.empty(0), np.empty(0)
+
+    @classmethod
+    def everywhere(cls, mask, padded_width, pressure):
+        """Every point of the slab in ``S`` with the same ``pressure``: a uniform start.
+
+        Built directly, without the full pressure field a general start needs.
+        """
+        contact = cls(mask, padded_width)
+        n_local = mask.size
+        contact._idx = np.arange(n_local, dtype=np.int64)
+        width = mask.shape[1]
+        contact._pidx = contact._idx // width
+        contact._pidx *= padded_width - width
+        contact._pidx += contact._idx
+        contact._p = np.full(n_local, float(pressure))
+        contact._t = np.zeros(n_local)
+        contact._g = np.empty(n_local)
+        contact.size = n_local
+        mask[...] = 1
+        return contact
+
+    @classmethod
+    def from_pressure(cls, mask, padded_width, pressure):
+        """``S = {pressure > 0}`` with the pressure on it (a warm or rigid start)."""
+        contact = cls(mask, padded_width)
+        points = np.flatnonzero(pressure > 0)
+        contact.merge(points, pressure.ravel()[points])
+        return contact
+
+    # Views of the first ``size`` entries: what the kernels see.
+    @property
+    def idx(self):
+        return self._idx[:self.size]
+
+    @property
+    def pidx(self):
+        return self._pidx[:self.size]
+
+    @property
+    def p(self):
+        return self._p[:self.size]
+
+    @property
+    def t(self):
+        return self._t[:self.size]
+
+    @property
+    def g(self):
+        return self._g[:self.size]
+
+    @property
+    def capacity(self):
+        return len(self._idx)
+
+    def merge(self, added, added_p):
+        """Drop the points whose pressure fell to zero, let ``added`` in with ``added_p``.
+
+        ``added`` are sorted flat indices off ``S``; those with ``added_p <= 0``
+        stay out; the others enter with a zero direction.
+        """
+        needed = self.size + len(added)
+        if needed > self.capacity:
+            self._resize(max(int(_SPARE * needed), 1024))
+        self.size = _cs.merge(self._idx, self._pidx, self._p, self._t, self.size,
+                              np.ascontiguousarray(added, dtype=np.int64),
+                              np.ascontiguousarray(added_p, dtype=float), self.mask,
+                              self.padded_width)
+        if self.capacity > 4096 and self.size < _SHRINK_BELOW * self.capacity:
+            self._resize(max(int(_SPARE * self.size), 1024))
+
+    def _resize(self, capacity):
+        # One array at a time: the transient is a single array, not a second set.
+        for name in self._names:
+            old = getattr(self, name)
+            new = np.empty(capacity, dtype=old.dtype)
+            keep = min(self.size, capacity)
+            new[:keep] = old[:keep]
+            setattr(self, name, new)
+            del old
