@@ -14,6 +14,9 @@ Index conventions: ``idx`` holds flat indices into this rank's unpadded
 ``(nx_local, ny)`` slabs (topography, displacement, contact mask), ``pidx`` the
 matching flat indices into the padded FFT buffer ``(nx_local, 2 (ny // 2 + 1))``.
 Both are sorted ascending, so gathers and scatters walk memory forwards.
+They are 32-bit (``numpy.int32``), which halves their share of the set's
+memory; :class:`petgap.contact_set.ContactSet` refuses slabs with 2^31 padded
+points or more (on one rank, some 17 GB per field).
 
 Every function works on this rank's data only and returns partial sums or
 extrema for the caller to reduce over MPI.
@@ -22,8 +25,10 @@ import numpy as np
 
 from libc.string cimport memset
 
+ctypedef int index_t  # numpy.int32: flat indices into one rank's (padded) slab
 
-def fill(double[:, ::1] pad, const long[::1] pidx, const double[::1] values, double scale):
+
+def fill(double[:, ::1] pad, const index_t[::1] pidx, const double[::1] values, double scale):
     """``pad = scale * values`` on S and 0 elsewhere: the FFT input ``P_S x``."""
     cdef Py_ssize_t k, ns = pidx.shape[0]
     cdef double *flat
@@ -36,8 +41,8 @@ def fill(double[:, ::1] pad, const long[::1] pidx, const double[::1] values, dou
             flat[pidx[k]] = scale * values[k]
 
 
-def gather_gap(const double[:, ::1] src, const long[::1] sidx, const double[:, ::1] h,
-               const long[::1] idx, double offset, double[::1] gS):
+def gather_gap(const double[:, ::1] src, const index_t[::1] sidx, const double[:, ::1] h,
+               const index_t[::1] idx, double offset, double[::1] gS):
     """``gS = src - h + offset`` on S (``src`` indexed by ``sidx``); returns ``sum gS``."""
     cdef Py_ssize_t k, ns = idx.shape[0]
     cdef double v, s = 0.0
@@ -72,7 +77,7 @@ def shift_and_norms(double[::1] gS, double shift):
 
 def gap_pass(const double[:, ::1] src, const double[:, ::1] h, const unsigned char[:, ::1] mask,
              double[:, ::1] u, bint store, double offset, double[:, ::1] pad, bint masked_gap,
-             long[::1] overlap):
+             index_t[::1] overlap):
     """The one full pass of an iteration, over the gap ``g = src - h + offset``.
 
     * ``u = src`` if ``store`` (``src`` is then the FFT buffer holding ``K^{-1} p``);
@@ -132,7 +137,7 @@ def gap_pass(const double[:, ::1] src, const double[:, ::1] h, const unsigned ch
 
 
 def collect_overlap(const double[:, ::1] u, const double[:, ::1] h,
-                    const unsigned char[:, ::1] mask, double offset, long[::1] overlap):
+                    const unsigned char[:, ::1] mask, double offset, index_t[::1] overlap):
     """Flat indices of the points off S with ``u - h + offset < 0``; returns their number."""
     cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1], cap = overlap.shape[0]
     cdef Py_ssize_t count = 0
@@ -146,7 +151,7 @@ def collect_overlap(const double[:, ::1] u, const double[:, ::1] h,
     return count
 
 
-def gather_sums(const double[:, ::1] pad, const long[::1] pidx, const double[::1] gS):
+def gather_sums(const double[:, ::1] pad, const index_t[::1] pidx, const double[::1] gS):
     """Returns ``(sum z, sum gS z)`` over S with ``z = pad`` (the preconditioned gap)."""
     cdef Py_ssize_t k, ns = pidx.shape[0]
     cdef double z, sz = 0.0, sgz = 0.0
@@ -170,7 +175,7 @@ def direction(const double[::1] zS, double zshift, double beta, double[::1] tS):
             tS[k] = zS[k] - zshift + beta * tS[k]
 
 
-def direction_from_buffer(const double[:, ::1] pad, const long[::1] pidx, double zshift,
+def direction_from_buffer(const double[:, ::1] pad, const index_t[::1] pidx, double zshift,
                           double beta, double[::1] tS):
     """``tS = (pad - zshift) + beta tS`` on S: :func:`direction` reading ``z`` where
     the preconditioner left it, so that no vector of S is spent on holding it."""
@@ -184,7 +189,7 @@ def direction_from_buffer(const double[:, ::1] pad, const long[::1] pidx, double
             tS[k] = pf[pidx[k]] - zshift + beta * tS[k]
 
 
-def step_sums(const double[:, ::1] pad, const long[::1] pidx, const double[::1] gS,
+def step_sums(const double[:, ::1] pad, const index_t[::1] pidx, const double[::1] gS,
               const double[::1] tS):
     """Returns ``(sum r, sum g t, sum r t, sum t)`` over S with ``r = pad = K^{-1} P_S t``."""
     cdef Py_ssize_t k, ns = pidx.shape[0]
@@ -229,7 +234,7 @@ def update(double[::1] pS, const double[::1] tS, const double[::1] gS, double ta
     return overlap, clipped, total
 
 
-def overlap_pressures(const double[:, ::1] u, const double[:, ::1] h, const long[::1] points,
+def overlap_pressures(const double[:, ::1] u, const double[:, ::1] h, const index_t[::1] points,
                       double offset, double entry, double[::1] out):
     """``out = -entry g`` at the overlap points off S, ``g = u - h + offset``; returns the sum.
 
@@ -252,8 +257,8 @@ def overlap_pressures(const double[:, ::1] u, const double[:, ::1] h, const long
     return s
 
 
-def merge(long[::1] idx, long[::1] pidx, double[::1] pS, double[::1] tS, Py_ssize_t size,
-          const long[::1] added, const double[::1] added_p, unsigned char[:, ::1] mask,
+def merge(index_t[::1] idx, index_t[::1] pidx, double[::1] pS, double[::1] tS, Py_ssize_t size,
+          const index_t[::1] added, const double[::1] added_p, unsigned char[:, ::1] mask,
           Py_ssize_t padded_width):
     """The new contact set, in place: points of S with ``pS > 0`` merged with the added points.
 

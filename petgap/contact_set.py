@@ -18,6 +18,8 @@ import numpy as np
 
 from . import _contact_set as _cs
 
+#: dtype of the index lists (``index_t`` of the kernels)
+INDEX = np.int32
 _SHRINK_BELOW = 0.25  # shrink when the set fills less than this of its buffers
 _SPARE = 1.5          # capacity given on growing or shrinking, times the set size
 
@@ -36,11 +38,16 @@ class ContactSet:
     _names = ("_idx", "_pidx", "_p", "_t", "_g")
 
     def __init__(self, mask, padded_width):
+        if mask.shape[0] * padded_width > np.iinfo(INDEX).max:
+            raise ValueError(
+                f"this rank's slab ({mask.shape[0]} x {padded_width} padded points) is too "
+                f"large for the contact set's 32-bit index lists (at most 2^31 points per "
+                f"rank): run on more MPI ranks")
         self.mask, self.padded_width = mask, padded_width
         self.size = 0
         mask[...] = 0
-        self._idx = np.empty(0, dtype=np.int64)
-        self._pidx = np.empty(0, dtype=np.int64)
+        self._idx = np.empty(0, dtype=INDEX)
+        self._pidx = np.empty(0, dtype=INDEX)
         self._p, self._t, self._g = np.empty(0), np.empty(0), np.empty(0)
 
     @classmethod
@@ -51,7 +58,7 @@ class ContactSet:
         """
         contact = cls(mask, padded_width)
         n_local = mask.size
-        contact._idx = np.arange(n_local, dtype=np.int64)
+        contact._idx = np.arange(n_local, dtype=INDEX)
         width = mask.shape[1]
         contact._pidx = contact._idx // width
         contact._pidx *= padded_width - width
@@ -106,7 +113,7 @@ class ContactSet:
         if needed > self.capacity:
             self._resize(max(int(_SPARE * needed), 1024))
         self.size = _cs.merge(self._idx, self._pidx, self._p, self._t, self.size,
-                              np.ascontiguousarray(added, dtype=np.int64),
+                              np.ascontiguousarray(added, dtype=INDEX),
                               np.ascontiguousarray(added_p, dtype=float), self.mask,
                               self.padded_width)
         if self.capacity > 4096 and self.size < _SHRINK_BELOW * self.capacity:

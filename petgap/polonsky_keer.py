@@ -60,7 +60,7 @@ from mpi4py import MPI
 
 from . import _contact_set as _cs
 from .contact import Load, MeanGap, Timer
-from .contact_set import ContactSet
+from .contact_set import INDEX, ContactSet
 
 
 def _sums(comm, *values):
@@ -147,7 +147,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         # the summits, and the set oscillated at 20-60 % of the points without
         # converging (seen at 1024^2 and 8192^2).
         contact = ContactSet.everywhere(mask, padded_width, target)
-    overlap = np.empty(max(1024, n // (100 * comm.size)), dtype=np.int64)
+    overlap = np.empty(max(1024, n // (100 * comm.size)), dtype=INDEX)
     u = np.empty(grid.local_shape)
     half_space = problem.half_space
     scale, fresh = 1.0, True
@@ -176,7 +176,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         pen_max, n_over = _cs.gap_pass(src, h, mask, u, fresh, offset - shift, padded,
                                        preconditioned, overlap)
         if n_over > len(overlap):
-            overlap = np.empty(2 * n_over, dtype=np.int64)
+            overlap = np.empty(2 * n_over, dtype=INDEX)
             _cs.collect_overlap(u, h, mask, offset - shift, overlap)
         norms = np.array([in_max, pen_max])
         comm.Allreduce(MPI.IN_PLACE, norms, op=MPI.MAX)

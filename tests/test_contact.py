@@ -738,10 +738,10 @@ def test_contact_set_merge_and_overlap_collection():
     rng = np.random.default_rng(3)
     m, n, width = 7, 9, 12
     mask = (rng.random((m, n)) < 0.4).astype(np.uint8)
-    idx = np.flatnonzero(mask)
+    idx = np.flatnonzero(mask).astype(np.int32)
     pS = rng.random(len(idx)) - 0.3          # about 30 % leave the set
     tS = rng.standard_normal(len(idx))
-    off = np.flatnonzero(mask == 0)
+    off = np.flatnonzero(mask == 0).astype(np.int32)
     added = np.sort(rng.choice(off, size=5, replace=False))
     added_p = np.array([0.5, 0.1, -0.2, 0.3, 0.7])  # the negative one stays out
 
@@ -750,7 +750,7 @@ def test_contact_set_merge_and_overlap_collection():
     lookup = dict(zip(idx[keep], zip(pS[keep], tS[keep])))
     lookup.update({a: (q, 0.0) for a, q in zip(added, added_p) if q > 0})
     capacity = max(len(idx), len(expected))
-    buffers = [np.zeros(capacity, dtype=np.int64), np.zeros(capacity, dtype=np.int64),
+    buffers = [np.zeros(capacity, dtype=np.int32), np.zeros(capacity, dtype=np.int32),
                np.zeros(capacity), np.zeros(capacity)]
     buffers[0][:len(idx)], buffers[2][:len(idx)], buffers[3][:len(idx)] = idx, pS, tS
     with pytest.raises(ValueError, match="cannot hold"):  # every point off S enters
@@ -768,14 +768,14 @@ def test_contact_set_merge_and_overlap_collection():
     u = rng.standard_normal((m, n))
     h = np.zeros((m, n))
     pad = np.empty((m, width))
-    small = np.empty(2, dtype=np.int64)
+    small = np.empty(2, dtype=np.int32)
     pen, count = cs.gap_pass(u, h, mask, np.empty((m, n)), False, 0.0, pad, True, small)
     truth = np.flatnonzero((u < 0) & (mask == 0))
     assert count == len(truth) > 2
     assert pen == pytest.approx(-u[(u < 0) & (mask == 0)].min())
     np.testing.assert_array_equal(small, truth[:2])
     np.testing.assert_array_equal(pad[:, :n], np.where(mask > 0, u, 0.0))
-    big = np.empty(count, dtype=np.int64)
+    big = np.empty(count, dtype=np.int32)
     assert cs.collect_overlap(u, h, mask, 0.0, big) == count
     np.testing.assert_array_equal(big, truth)
 
@@ -816,3 +816,8 @@ def test_contact_set_keeps_one_copy_as_it_shrinks_and_grows():
     np.testing.assert_array_equal(np.flatnonzero(mask), both)
     np.testing.assert_array_equal(contact.pidx, (both // n) * width + both % n)
     np.testing.assert_array_equal(contact.t[np.isin(both, added)], 0.0)
+
+    # The index lists are 32-bit: a slab beyond them is refused, not corrupted.
+    huge = np.broadcast_to(np.uint8(0), (70000, 40000))  # no memory behind it
+    with pytest.raises(ValueError, match="32-bit index lists.*more MPI ranks"):
+        ContactSet(huge, 40002)
