@@ -271,7 +271,10 @@ def merge(index_t[::1] idx, index_t[::1] pidx, double[::1] pS, double[::1] tS, P
     Working in place is what keeps the set's memory to one copy: S is first
     compacted forwards (the write position never passes the read position),
     then merged with the added points backwards from the new end (the write
-    position never falls below the unread part of S).
+    position never falls below the unread part of S).  ``pidx`` moves with
+    ``idx`` and is computed for the added points only: the integer division it
+    takes would otherwise cost a pass over the whole set, which matters while
+    the set is large (the first iterations of a cold start).
     """
     cdef Py_ssize_t ns = size, na = added.shape[0]
     cdef Py_ssize_t n = mask.shape[1], a, k, kept = 0, w, extra = 0
@@ -297,6 +300,7 @@ def merge(index_t[::1] idx, index_t[::1] pidx, double[::1] pS, double[::1] tS, P
         for k in range(ns):
             if pS[k] > 0.0:
                 idx[kept] = idx[k]
+                pidx[kept] = pidx[k]
                 pS[kept] = pS[k]
                 tS[kept] = tS[k]
                 kept += 1
@@ -311,19 +315,19 @@ def merge(index_t[::1] idx, index_t[::1] pidx, double[::1] pS, double[::1] tS, P
                 continue
             if k >= 0 and idx[k] > added[a]:
                 idx[w] = idx[k]
+                pidx[w] = pidx[k]
                 pS[w] = pS[k]
                 tS[w] = tS[k]
                 k -= 1
             else:
                 point = added[a]
                 idx[w] = point
+                pidx[w] = point + (point // n) * (padded_width - n)
                 pS[w] = added_p[a]
                 tS[w] = 0.0
                 mf[point] = 1
                 a -= 1
             w -= 1
-        for k in range(kept + extra):
-            pidx[k] = idx[k] + (idx[k] // n) * (padded_width - n)
     return kept + extra
 
 

@@ -753,6 +753,7 @@ def test_contact_set_merge_and_overlap_collection():
     buffers = [np.zeros(capacity, dtype=np.int32), np.zeros(capacity, dtype=np.int32),
                np.zeros(capacity), np.zeros(capacity)]
     buffers[0][:len(idx)], buffers[2][:len(idx)], buffers[3][:len(idx)] = idx, pS, tS
+    buffers[1][:len(idx)] = (idx // n) * width + idx % n  # pidx moves with idx
     with pytest.raises(ValueError, match="cannot hold"):  # every point off S enters
         cs.merge(*[b[:len(idx)].copy() for b in buffers], len(idx), off, np.ones(len(off)),
                  mask.copy(), width)
