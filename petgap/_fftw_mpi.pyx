@@ -115,6 +115,16 @@ def import_wisdom(MPI.Comm comm, text):
     return bool(ok)
 
 
+cdef _check_plan_inputs(cnp.ndarray real, cnp.ndarray fourier, str planner):
+    """The checks both plan classes make before FFTW reads the buffers' memory."""
+    if planner not in PLANNER_FLAGS:
+        raise ValueError(f"planner={planner!r} is not one of {sorted(PLANNER_FLAGS)}")
+    if real.dtype != np.float64 or not real.flags.c_contiguous:
+        raise TypeError("real buffer must be C-contiguous float64")
+    if fourier.dtype != np.complex128 or not fourier.flags.c_contiguous:
+        raise TypeError("fourier buffer must be C-contiguous complex128")
+
+
 cdef inline void _destroy(fftw_plan *plan):
     """Destroy a plan that may never have been made, and forget it."""
     if plan[0] != NULL:
@@ -148,12 +158,7 @@ cdef class SlabPlans:
 
     def __init__(self, MPI.Comm comm, Py_ssize_t n0, Py_ssize_t n1,
                  cnp.ndarray real, cnp.ndarray fourier, str planner="measure"):
-        if planner not in PLANNER_FLAGS:
-            raise ValueError(f"planner={planner!r} is not one of {sorted(PLANNER_FLAGS)}")
-        if real.dtype != np.float64 or not real.flags.c_contiguous:
-            raise TypeError("real buffer must be C-contiguous float64")
-        if fourier.dtype != np.complex128 or not fourier.flags.c_contiguous:
-            raise TypeError("fourier buffer must be C-contiguous complex128")
+        _check_plan_inputs(real, fourier, planner)
         self.comm, self.real, self.fourier = comm, real, fourier
         cdef unsigned flags = PLANNER_FLAGS[planner]
         cdef double *r = <double *>cnp.PyArray_DATA(real)
@@ -225,12 +230,7 @@ cdef class ConvolutionPlans:
     def __init__(self, MPI.Comm comm, Py_ssize_t n0, Py_ssize_t n1, Py_ssize_t local_n0,
                  Py_ssize_t local_n1, cnp.ndarray real, cnp.ndarray fourier,
                  str planner="measure"):
-        if planner not in PLANNER_FLAGS:
-            raise ValueError(f"planner={planner!r} is not one of {sorted(PLANNER_FLAGS)}")
-        if real.dtype != np.float64 or not real.flags.c_contiguous:
-            raise TypeError("real buffer must be C-contiguous float64")
-        if fourier.dtype != np.complex128 or not fourier.flags.c_contiguous:
-            raise TypeError("fourier buffer must be C-contiguous complex128")
+        _check_plan_inputs(real, fourier, planner)
         if local_n0 <= 0 or local_n1 <= 0:
             raise ValueError("every rank needs at least one real and one Fourier row")
         self.comm, self.real, self.fourier = comm, real, fourier

@@ -25,7 +25,7 @@ _SPARE = 1.5          # capacity given on growing or shrinking, times the set si
 
 
 class ContactSet:
-    """``S`` with ``p`` and ``t`` on it, stored in place (see the module docstring).
+    """``S`` with ``p``, ``t`` and ``g`` on it, stored in place (see the module docstring).
 
     Parameters
     ----------
@@ -72,7 +72,8 @@ class ContactSet:
 
     @classmethod
     def from_pressure(cls, mask, padded_width, pressure):
-        """``S = {pressure > 0}`` with the pressure on it (a warm or rigid start)."""
+        """``S = {pressure > 0}`` with the pressure on it (a warm start, or where the
+        undeformed surfaces overlap under mean-gap control)."""
         contact = cls(mask, padded_width)
         points = np.flatnonzero(pressure > 0)
         contact.merge(points, pressure.ravel()[points])
@@ -121,10 +122,12 @@ class ContactSet:
 
     def _resize(self, capacity):
         # One array at a time: the transient is a single array, not a second set.
+        # The gap is scratch, refilled every iteration: nothing of it to keep.
+        keep = min(self.size, capacity)
         for name in self._names:
             old = getattr(self, name)
             new = np.empty(capacity, dtype=old.dtype)
-            keep = min(self.size, capacity)
-            new[:keep] = old[:keep]
+            if name != "_g":
+                new[:keep] = old[:keep]
             setattr(self, name, new)
             del old

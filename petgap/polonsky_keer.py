@@ -45,7 +45,7 @@ buffer where the transform left it.
 
 Cold start under load control: a uniform pressure, so the first iterations
 work on every point and the set shrinks from there; it is updated in place,
-so its peak is one copy of the whole slab's set (40 bytes per point).  A
+so its peak is one copy of the whole slab's set (32 bytes per point).  A
 start nearer the answer (the rigid approach carrying the load) saved 5-15 %
 of the iterations but did not converge on some surfaces (see the comment in
 :func:`polonsky_keer`).
