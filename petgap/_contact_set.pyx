@@ -342,3 +342,69 @@ def recurrence(double[:, ::1] u, const double[:, ::1] pad, double tau, double sc
             rr = &pad[i, 0]
             for j in range(n):
                 ur[j] = scale * (ur[j] - tau * rr[j])
+
+
+# ----------------------------------------------------------------------------
+# The first iteration of a cold start from a uniform pressure, in closed form.
+#
+# With p = P0 on every point, u = K^{-1} p = 0 (no q = 0 mode), so the gap,
+# shifted to zero mean over S (everywhere), is g = mean(h) - h; the
+# preconditioned gap is z = K g; the direction is t = z - mean(z); its image
+# r = K^{-1} t = g; and the step tau = (g, t) / (r, t) = 1.  The iteration thus
+# needs one transform (K g) where the general one takes three, and no set of
+# every point.  These kernels are its three passes over the slab.
+
+def uniform_gap(double[:, ::1] pad, const double[:, ::1] h, double hbar):
+    """``pad = hbar - h`` (0 in the padding); returns ``(max |pad|, sum pad^2)``."""
+    cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1], w = pad.shape[1]
+    cdef double v, a, gmax = 0.0, norm = 0.0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                v = hbar - h[i, j]
+                pad[i, j] = v
+                norm += v * v
+                a = v if v >= 0.0 else -v
+                if not a <= gmax:   # also lets a NaN through
+                    gmax = a
+            for j in range(n, w):
+                pad[i, j] = 0.0
+    return gmax, norm
+
+
+def uniform_sums(const double[:, ::1] pad, const double[:, ::1] h, double hbar):
+    """Returns ``(sum z, sum (hbar - h) z)`` with ``z = pad`` (the preconditioned gap)."""
+    cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1]
+    cdef double z, sz = 0.0, sgz = 0.0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                z = pad[i, j]
+                sz += z
+                sgz += (hbar - h[i, j]) * z
+    return sz, sgz
+
+
+def uniform_step(const double[:, ::1] pad, const double[:, ::1] h, double hbar, double zshift,
+                 double pressure, double entry, double[:, ::1] p):
+    """``p = max(pressure - (z - zshift), 0)``, or ``entry (h - hbar)`` where that is
+    <= 0 and the point penetrates (``h > hbar``): :func:`update` with ``tau = 1``.
+
+    Returns ``(points re-entering by overlap, points clipped, sum p)``.
+    """
+    cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1]
+    cdef double v, total = 0.0
+    cdef long clipped = 0, overlap = 0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                v = pressure - (pad[i, j] - zshift)
+                if v <= 0.0:
+                    clipped += 1
+                    v = 0.0
+                    if h[i, j] > hbar:
+                        v = entry * (h[i, j] - hbar)
+                        overlap += 1
+                p[i, j] = v
+                total += v
+    return overlap, clipped, total

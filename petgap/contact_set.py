@@ -71,11 +71,17 @@ class ContactSet:
         return contact
 
     @classmethod
-    def from_pressure(cls, mask, padded_width, pressure):
-        """``S = {pressure > 0}`` with the pressure on it (a warm start, or where the
-        undeformed surfaces overlap under mean-gap control)."""
+    def from_pressure(cls, mask, padded_width, pressure, spare=_SPARE):
+        """``S = {pressure > 0}`` with the pressure on it (a warm start, where the
+        undeformed surfaces overlap under mean-gap control, or the first step of a
+        cold start).
+
+        ``spare`` sets the buffers' capacity in units of the set's size: a set
+        that can only shrink from here (a cold start) needs none.
+        """
         contact = cls(mask, padded_width)
         points = np.flatnonzero(pressure > 0)
+        contact._resize(max(int(spare * len(points)), 1024))
         contact.merge(points, pressure.ravel()[points])
         return contact
 

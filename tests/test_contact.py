@@ -29,7 +29,9 @@ from petgap import reference as ref
 from petgap.contact import ContactProblem, Load, MeanGap
 from petgap.elastic import ElasticHalfSpace
 from petgap.grid import Grid
+from petgap import polonsky_keer as pk
 from petgap.interaction import ExponentialAdhesion, HardWall
+from petgap.polonsky_keer import polonsky_keer
 from petgap.solver import GapHessian, solve, sweep
 from petgap.surface import self_affine
 
@@ -721,6 +723,42 @@ def test_iteration_limit_is_not_success(comm, solver, control):
     assert not sol.converged
     assert sol.reason and not sol.reason.startswith("converged") and sol.reason != "success"
     assert sol.kkt_pressure > 1e-10 or sol.kkt_gap > 1e-10
+
+
+def test_uniform_cold_start_in_closed_form_is_the_general_first_iteration(comm, monkeypatch):
+    """The cold start's first iteration in closed form takes the general one's path.
+
+    From a uniform pressure the general iteration's three transforms reduce
+    to one (``u = 0``, ``r = g``, ``tau = 1``; see
+    :func:`petgap.polonsky_keer._uniform_first_iteration`).  Solved both ways,
+    the residual histories agree to round-off, so do the iteration counts and
+    the states, and the closed form saves exactly two operator applications.
+    """
+    grid = make_grid((96, 64), comm, size=(1.5, 1.0))
+    problem = rough_problem(grid, seed=5)
+    control = Load(0.02 * problem.pressure_scale)
+    closed = polonsky_keer(problem, control, tolerance=1e-10)
+    monkeypatch.setattr(pk, "_uniform_first_iteration", lambda *a, **k: None)
+    general = polonsky_keer(problem, control, tolerance=1e-10)
+    assert closed.converged and general.converged
+    assert closed.iterations == general.iterations
+    assert closed.operator_applications == general.operator_applications - 2
+    np.testing.assert_allclose(closed.history, general.history, rtol=1e-6, atol=1e-12)
+    h0, ps = problem.gap_scale, problem.pressure_scale
+    assert max_abs(grid, closed.gap - general.gap) <= 1e-9 * h0
+    assert max_abs(grid, closed.pressure - general.pressure) <= 1e-9 * ps
+    assert closed.contact_fraction == general.contact_fraction
+
+
+def test_no_iteration_allowed_reports_the_uniform_start(comm):
+    """With no iteration allowed the cold start is reported as it is: uniform, not converged."""
+    grid = make_grid((32, 24), comm)
+    problem = rough_problem(grid)
+    load = 0.02 * problem.pressure_scale
+    sol = polonsky_keer(problem, Load(load), tolerance=1e-10, max_iterations=0)
+    assert not sol.converged and sol.reason == "max_iterations" and sol.iterations == 0
+    assert max_abs(grid, sol.pressure - load) <= 1e-12 * load
+    assert len(sol.history) == 1 and sol.operator_applications == 1
 
 
 def test_contact_set_merge_and_overlap_collection():
