@@ -7,8 +7,8 @@ slab (``idx``) and in the padded FFT buffer (``pidx``); the kernels that work on
 them are in ``petgap/_contact_set.pyx``.
 
 Why a class around five arrays: memory.  A cold start from a uniform pressure
-puts every point in ``S``, and the set then shrinks to the few percent that
-carry the load.  The vectors therefore live in buffers with spare capacity,
+puts about 60 % of the points in ``S`` after its first step, and the set then
+shrinks to the few percent that carry the load.  The vectors therefore live in buffers with spare capacity,
 updated in place by :func:`petgap._contact_set.merge` (never two copies of the
 set at once), grown one array at a time when points enter beyond the
 capacity, and shrunk one array at a time when the set has fallen well below

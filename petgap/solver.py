@@ -211,9 +211,11 @@ def _tao_solve(problem, control, tao_type, tolerance, max_iterations, initial, o
             context = _PetgapTao(tao_type, problem, control, tolerance, initial, monitor)
             tao.setType(PETSc.TAO.Type.PYTHON)
             tao.setPythonContext(context)
+            # The options stay in force through the solve: TAO reads some of
+            # them there (-tao_view, -tao_converged_reason), not in setFromOptions.
             with _options(options):
                 tao.setFromOptions()
-            tao.solve()
+                tao.solve()
             solution = context.solution
             solution.wall_time = timer()
             return solution
@@ -372,9 +374,9 @@ def _gap_tao(problem, control, tao, x, tao_type, tolerance, initial, options, mo
         ksp = tao.getKSP()
         if ksp is not None and ksp.handle:
             ksp.getPC().setType("none")  # matrix-free Hessian: no entries to factor
-        with _options(options):
+        with _options(options):  # through the solve, as in _tao_solve
             tao.setFromOptions()
-        tao.solve()
+            tao.solve()
         reason_code = tao.getConvergedReason()
         reason = _REASONS.get(reason_code, str(reason_code)).lower()
         converged = reason_code == PETSc.TAO.Reason.CONVERGED_USER

@@ -713,6 +713,25 @@ def test_mean_gap_above_highest_summit_has_no_contact(comm, solver):
 
 
 @pytest.mark.parametrize("solver", ["pcg", "blmvm"])
+def test_petsc_options_given_to_solve_last_through_the_solve(comm, solver, capfd):
+    """``options=`` are in force while TAO solves, not only while it reads its options.
+
+    ``-tao_view`` is read by ``TaoSolve`` itself; it used to be ignored when
+    given this way (the options were removed again after ``setFromOptions``).
+    """
+    grid = make_grid((32, 24), comm)
+    problem = rough_problem(grid)
+    sol = solve(problem, Load(0.02 * problem.pressure_scale), solver=solver, tolerance=1e-6,
+                options={"tao_view": None})
+    assert sol.converged
+    PETSc.Sys.syncFlush(comm=grid.comm)
+    out = capfd.readouterr().out
+    if comm.rank == 0:
+        assert "Tao Object" in out, out[-2000:]
+    assert not PETSc.Options().hasName("tao_view")  # and removed afterwards
+
+
+@pytest.mark.parametrize("solver", ["pcg", "blmvm"])
 @pytest.mark.parametrize("control", ["load", "mean-gap"])
 def test_iteration_limit_is_not_success(comm, solver, control):
     grid = make_grid((64, 48), comm, size=(1.0, 0.75))
