@@ -291,6 +291,36 @@ def _max_or_zero(values):
     return float(values.max()) if values.size else 0.0
 
 
+def judge(residual, tolerance, fresh, iteration, max_iterations, history, monitor):
+    """The verdict of an iterative solver on the residual at the start of an iteration.
+
+    Shared by the conjugate-gradient solvers (:mod:`petgap.polonsky_keer`,
+    :mod:`petgap.gap_cg`), which update their fields by recurrences between
+    fresh transforms: a converged verdict is only given on a fresh
+    evaluation, so that accumulated round-off never passes for convergence.
+
+    Returns
+    -------
+    str
+        ``"diverged_nan"``; ``"refresh"`` (converged on a recurrence: evaluate
+        afresh and judge again; nothing is recorded); ``"converged_kkt"`` or
+        ``"max_iterations"`` (stop); or ``""`` (carry on).  Except for the first
+        two, the residual is appended to ``history`` and passed to ``monitor``.
+    """
+    if not np.isfinite(residual):
+        return "diverged_nan"
+    if residual <= tolerance and not fresh:
+        return "refresh"
+    history.append(residual)
+    if monitor is not None:
+        monitor(iteration, residual)
+    if residual <= tolerance:
+        return "converged_kkt"
+    if iteration >= max_iterations:
+        return "max_iterations"
+    return ""
+
+
 class Timer:
     """Wall-clock seconds since construction (``time.perf_counter``)."""
 

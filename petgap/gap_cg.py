@@ -88,7 +88,7 @@ import numpy as np
 from mpi4py import MPI
 
 from . import _kernels as _k
-from .contact import Load, MeanGap, Timer
+from .contact import Load, MeanGap, Timer, judge
 
 
 def _sums(comm, *values):
@@ -233,21 +233,14 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
             residual = max(ext[0] + lam, ext[1] - lam) / problem.pressure_scale
         else:
             residual = 0.0
-        if not np.isfinite(residual):
-            reason = "diverged_nan"
-            break
-        if residual <= tolerance and not fresh:
+        verdict = judge(residual, tolerance, fresh, it, max_iterations, history, monitor)
+        if verdict == "refresh":
             np.add(g, h, out=padded[:, :grid.ny])
             fresh_pressure()
             fresh, since_fresh = True, 0
             continue
-        history.append(residual)
-        if monitor is not None:
-            monitor(it, residual)
-        if residual <= tolerance:
-            converged, reason = True, "converged_kkt"
-            break
-        if it >= max_iterations:
+        if verdict:
+            converged, reason = verdict == "converged_kkt", verdict
             break
 
         # preconditioned residual z = P_F K^{-1} P_F r (one pair)

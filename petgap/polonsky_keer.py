@@ -61,7 +61,7 @@ import numpy as np
 from mpi4py import MPI
 
 from . import _contact_set as _cs
-from .contact import Load, MeanGap, Timer
+from .contact import Load, MeanGap, Timer, judge
 from .contact_set import INDEX, ContactSet
 
 
@@ -196,20 +196,12 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         norms = np.array([in_max, pen_max])
         comm.Allreduce(MPI.IN_PLACE, norms, op=MPI.MAX)
         residual = float(norms.max()) / problem.gap_scale
-        if not np.isfinite(residual):
-            reason = "diverged_nan"
-            break
-        if residual <= tolerance and not fresh:
-            # Verdicts are only given on a freshly evaluated displacement.
+        verdict = judge(residual, tolerance, fresh, it, max_iterations, history, monitor)
+        if verdict == "refresh":
             fresh, scale = True, 1.0
             continue
-        history.append(residual)
-        if monitor is not None:
-            monitor(it, residual)
-        if residual <= tolerance:
-            converged, reason = True, "converged_kkt"
-            break
-        if it >= max_iterations:
+        if verdict:
+            converged, reason = verdict == "converged_kkt", verdict
             break
         if n_contact == 0 or (load and n_contact == 1):
             # Mean-gap control with no contact yet, or load control on a single
