@@ -274,7 +274,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     g += offset - shift
     p = np.zeros(grid.local_shape)
     p.ravel()[contact.idx] = contact.p
-    contact = mask.astype(bool)
+    contact = mask.view(bool)  # 0 or 1: a valid boolean array, no copy
     residuals = problem.kkt_residuals(g, p, contact)
     g[contact] = 0.0
     np.maximum(g, 0.0, out=g)
