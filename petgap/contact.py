@@ -109,6 +109,7 @@ class ContactSolution:
     direction: str = "start"
     jump: bool = False
     negative_curvature_steps: int = 0
+    start: str = ""
 
     def scalars(self):
         """The scalar results as a flat dict (for HDF5 attributes and tables)."""
@@ -117,7 +118,7 @@ class ContactSolution:
             "elastic_energy", "interaction_energy", "kappa_rep", "repulsive_force",
             "attractive_force", "attractive_fraction", "inv_kappa_att", "kkt_pressure",
             "kkt_gap", "converged", "reason", "solver", "iterations", "operator_applications",
-            "wall_time", "direction", "jump", "negative_curvature_steps")}
+            "wall_time", "direction", "jump", "negative_curvature_steps", "start")}
         out["control"] = self.control.kind
         out["control_value"] = self.control.value
         return out
@@ -225,12 +226,14 @@ class ContactProblem:
         return pair[0] / self.pressure_scale, pair[1] / self.gap_scale
 
     def make_solution(self, gap, pressure, contact, control, *, converged, reason, solver,
-                      iterations, operator_applications, wall_time, history=(), residuals=None):
+                      iterations, operator_applications, wall_time, history=(), residuals=None,
+                      start=""):
         """Assemble a :class:`ContactSolution` with all derived quantities.
 
         ``residuals`` overrides the KKT residuals computed from ``gap`` and
         ``pressure`` (for a solver whose stored gap is a projection of the one
-        it iterated on).
+        it iterated on); ``start`` says how the solver started, where that is
+        more than the control and the warm start say (a coarse-grid solve).
         """
         grid = self.grid
         kkt_p, kkt_g = residuals if residuals is not None else \
@@ -278,7 +281,7 @@ class ContactProblem:
             kkt_pressure=kkt_p, kkt_gap=kkt_g, converged=bool(converged), reason=str(reason),
             solver=solver, iterations=int(iterations),
             operator_applications=int(operator_applications), wall_time=float(wall_time),
-            history=list(history))
+            history=list(history), start=str(start))
 
 
 def _blocks(nrows, points=1 << 16, ncols=None):

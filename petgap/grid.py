@@ -75,6 +75,8 @@ class Grid:
 
     def __init__(self, shape, size=None, comm=None, planner="measure", wisdom=True):
         self.comm = MPI.COMM_WORLD if comm is None else comm
+        #: FFTW planner effort and wisdom cache use, for grids derived from this one.
+        self.planner, self.wisdom = planner, wisdom
         nx, ny = _check_shape(shape)
         lx, ly = (float(nx), float(ny)) if size is None else _check_size(size)
         self.nx, self.ny, self.Lx, self.Ly = nx, ny, lx, ly

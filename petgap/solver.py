@@ -15,7 +15,10 @@ Solver types
     secant iteration on the mean gap around warm-started mean-gap solves, so
     that each step reports which branch it landed on.
 ``pcg-pressure``, ``pcg-gap``
-    Force one formulation.
+    Force one formulation.  A cold ``pcg-pressure`` solve starts from the
+    solution on a grid 2 or 4 times coarser where the shape allows
+    (:mod:`petgap.coarse`); ``-petgap_coarse_start 0`` starts it from the
+    uniform pressure instead.
 ``bncg``, ``blmvm``, ``bqnls``, ``gpcg`` (TAO built-ins)
     Bound-constrained minimisation over the gap ``g >= 0`` of the load-control
     energy :meth:`petgap.contact.ContactProblem.objective_gradient`, made
@@ -65,7 +68,8 @@ class _PetgapTao:
             self.solution = polonsky_keer(
                 self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
                 initial_pressure=None if self.initial is None else self.initial.pressure,
-                monitor=report)
+                monitor=report,
+                coarse_start=PETSc.Options().getBool("petgap_coarse_start", True))
         else:
             self.solution = gap_cg(
                 self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
