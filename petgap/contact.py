@@ -110,6 +110,7 @@ class ContactSolution:
     jump: bool = False
     negative_curvature_steps: int = 0
     start: str = ""
+    start_time: float = 0.0
 
     def scalars(self):
         """The scalar results as a flat dict (for HDF5 attributes and tables)."""
@@ -118,7 +119,8 @@ class ContactSolution:
             "elastic_energy", "interaction_energy", "kappa_rep", "repulsive_force",
             "attractive_force", "attractive_fraction", "inv_kappa_att", "kkt_pressure",
             "kkt_gap", "converged", "reason", "solver", "iterations", "operator_applications",
-            "wall_time", "direction", "jump", "negative_curvature_steps", "start")}
+            "wall_time", "direction", "jump", "negative_curvature_steps", "start",
+            "start_time")}
         out["control"] = self.control.kind
         out["control_value"] = self.control.value
         return out
@@ -227,13 +229,14 @@ class ContactProblem:
 
     def make_solution(self, gap, pressure, contact, control, *, converged, reason, solver,
                       iterations, operator_applications, wall_time, history=(), residuals=None,
-                      start=""):
+                      start="", start_time=0.0):
         """Assemble a :class:`ContactSolution` with all derived quantities.
 
         ``residuals`` overrides the KKT residuals computed from ``gap`` and
         ``pressure`` (for a solver whose stored gap is a projection of the one
         it iterated on); ``start`` says how the solver started, where that is
-        more than the control and the warm start say (a coarse-grid solve).
+        more than the control and the warm start say (a coarse-grid solve),
+        and ``start_time`` is the part of ``wall_time`` that start took.
         """
         grid = self.grid
         kkt_p, kkt_g = residuals if residuals is not None else \
@@ -281,7 +284,7 @@ class ContactProblem:
             kkt_pressure=kkt_p, kkt_gap=kkt_g, converged=bool(converged), reason=str(reason),
             solver=solver, iterations=int(iterations),
             operator_applications=int(operator_applications), wall_time=float(wall_time),
-            history=list(history), start=str(start))
+            history=list(history), start=str(start), start_time=float(start_time))
 
 
 def _blocks(nrows, points=1 << 16, ncols=None):

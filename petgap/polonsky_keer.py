@@ -129,6 +129,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     if initial_pressure is None and coarse_start:
         from .coarse import coarse_start as solve_coarse
         initial_pressure, start = solve_coarse(problem, control, tolerance, max_iterations)
+    start_time = timer()
     if initial_pressure is None:
         start = "; ".join(filter(None, [
             start, "uniform pressure" if load else "overlap of the undeformed surfaces"]))
@@ -296,7 +297,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         g, p, contact, control, converged=converged, reason=reason,
         solver="pcg-pressure", iterations=it, wall_time=timer(), history=history,
         operator_applications=problem.operator_applications - start_ops, residuals=residuals,
-        start=start)
+        start=start, start_time=start_time)
 
 
 def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, max_iterations,
