@@ -70,8 +70,10 @@ def shift_and_norms(double[::1] gS, double shift):
             gS[k] = v
             norm += v * v
             a = v if v >= 0.0 else -v
-            if not a <= in_max:   # also lets a NaN through
+            if a > in_max:
                 in_max = a
+    if norm != norm:
+        in_max = norm   # a NaN anywhere: reported, never hidden
     return in_max, norm
 
 
@@ -365,10 +367,12 @@ def uniform_gap(double[:, ::1] pad, const double[:, ::1] h, double hbar):
                 pad[i, j] = v
                 norm += v * v
                 a = v if v >= 0.0 else -v
-                if not a <= gmax:   # also lets a NaN through
+                if a > gmax:
                     gmax = a
             for j in range(n, w):
                 pad[i, j] = 0.0
+    if norm != norm:
+        gmax = norm   # a NaN anywhere: reported, never hidden
     return gmax, norm
 
 
@@ -408,3 +412,35 @@ def uniform_step(const double[:, ::1] pad, const double[:, ::1] h, double hbar, 
                 p[i, j] = v
                 total += v
     return overlap, clipped, total
+
+
+def final_gap(double[:, ::1] u, const double[:, ::1] h, const unsigned char[:, ::1] mask,
+              double offset):
+    """``u <- g = u - h + offset`` projected onto the contact state found, in place.
+
+    Returns the gap KKT residuals taken before the projection, ``(max |g| on S,
+    max(-g) off S)``; then ``g = 0`` on S and ``g = max(g, 0)`` elsewhere.  One
+    pass where NumPy took five.  A NaN makes the residual NaN.
+    """
+    cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1]
+    cdef double v, a, on = 0.0, off = 0.0
+    cdef long nan = 0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                v = u[i, j] - h[i, j] + offset
+                nan += v != v
+                if mask[i, j]:
+                    a = v if v >= 0.0 else -v
+                    if a > on:
+                        on = a
+                    v = 0.0
+                else:
+                    if -v > off:
+                        off = -v
+                    if v < 0.0:
+                        v = 0.0
+                u[i, j] = v
+    if nan:
+        return float("nan"), float("nan")   # reported, never hidden
+    return on, off

@@ -780,6 +780,21 @@ def test_no_iteration_allowed_reports_the_uniform_start(comm):
     assert len(sol.history) == 1 and sol.operator_applications == 1
 
 
+def test_final_gap_projects_and_measures_like_numpy():
+    """The pressure solver's last pass: residuals before, projection after, NaN kept."""
+    from petgap import _contact_set as cs
+
+    rng = np.random.default_rng(3)
+    u, h = rng.standard_normal((6, 9)), rng.standard_normal((6, 9))
+    mask = (rng.random((6, 9)) < 0.3).astype(np.uint8)
+    g = u - h + 0.2
+    on, off = cs.final_gap(u, h, mask, 0.2)
+    assert on == np.abs(g[mask == 1]).max() and off == max((-g[mask == 0]).max(), 0.0)
+    np.testing.assert_array_equal(u, np.where(mask == 1, 0.0, np.maximum(g, 0.0)))
+    u[2, 3] = np.nan
+    assert np.isnan(max(cs.final_gap(u, h, mask, 0.2), key=np.isnan))
+
+
 def test_contact_set_merge_and_overlap_collection():
     """The index-list kernels of the pressure solver (petgap/_contact_set.pyx).
 
