@@ -366,6 +366,9 @@ def _log_solution(log, step, solution):
              solution.operator_applications, solution.wall_time, solution.contact_fraction,
              solution.mean_gap, solution.mean_pressure, solution.kkt_pressure, solution.kkt_gap,
              ", jump" if solution.jump else "")
+    if solution.start.startswith("coarse"):
+        log.info("  step %d started from %s (%.2f s of the above)", step.index,
+                 solution.start, solution.start_time)
     if not solution.converged:
         log.warning("step %d did not converge: %s; stored with converged = False",
                     step.index, solution.reason)
