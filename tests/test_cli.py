@@ -65,6 +65,9 @@ def test_run_writes_result(comm, mpi_tmp_path, run_cli):
     assert step_attrs["complete"] is True and step_attrs["solution.converged"] is True
     assert step_attrs["solution.reason"] == "converged_kkt"
     assert step_attrs["solution.kkt_gap"] <= 1e-8
+    # how the solve started is provenance too (64 x 32 is too small for a coarse grid)
+    assert step_attrs["solution.start"] == "uniform pressure"
+    assert 0 <= step_attrs["solution.start_time"] <= step_attrs["solution.wall_time"]
     assert np.isclose(pressure.mean(), 0.002, rtol=1e-9)  # the load that was asked
     assert gap.min() >= -1e-8 * topo_attrs["statistics.rms_height"] and pressure.min() >= 0
     assert np.isclose(step_attrs["solution.mean_gap"], gap.mean(), rtol=1e-12)
