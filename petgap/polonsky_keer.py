@@ -126,9 +126,11 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         raise TypeError(f"unknown control {control!r}")
 
     start = "warm" if initial_pressure is not None else ""
+    owned = False  # may initial_pressure be overwritten (it is ours, not the caller's)?
     if initial_pressure is None and coarse_start:
         from .coarse import coarse_start as solve_coarse
         initial_pressure, start = solve_coarse(problem, control, tolerance, max_iterations)
+        owned = initial_pressure is not None
     start_time = timer()
     if initial_pressure is None:
         start = "; ".join(filter(None, [
@@ -142,7 +144,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     offset = problem.mean_height + target if not load else 0.0
     if initial_pressure is not None or not load:
         if initial_pressure is not None:
-            p = np.maximum(np.asarray(initial_pressure, dtype=float), 0.0)
+            p = np.asarray(initial_pressure, dtype=float)
+            p = np.maximum(p, 0.0, out=p if owned else None)
         else:
             # Mean-gap control: pressure where the undeformed surfaces overlap.
             p = np.maximum(h - offset, 0.0) * (problem.pressure_scale / problem.gap_scale)
