@@ -55,7 +55,7 @@ def test_resample_keeps_the_band_exactly(comm):
     # generated: band-limited to round-off.  dropped_power is a relative
     # difference of two sums of squared modes (all, and those in the band),
     # each exact to a few ulp, so round-off leaves up to ~1e-16 (seen: 2.2e-16
-    # with some FFTW plans, 0 with others); 1e-12 is that floor with room for
+    # with some FFTW plans, below 1e-25 with others); 1e-12 is that floor with room for
     # the number of modes, and far below white noise's 0.5
     assert band.dropped_power < 1e-12
     assert dropped_noise > 0.5                   # white noise is not
