@@ -57,12 +57,11 @@ def coarsening_factor(shape):
 def coarse_problem(problem):
     """The block-averaged problem on the coarse grid, made once and kept; None if none.
 
-    Collective.  Kept on ``problem`` (attribute ``_coarse``) so that the steps
-    of a sweep share it; about ``1/f^2`` of the fine problem's memory.
+    Collective.  Kept on ``problem`` (``ContactProblem._coarse``) so that the
+    steps of a sweep share it; about ``1/f^2`` of the fine problem's memory.
     """
-    cached = getattr(problem, "_coarse", False)
-    if cached is not False:
-        return cached
+    if problem._coarse is not False:
+        return problem._coarse
     from .contact import ContactProblem
     from .elastic import ElasticHalfSpace
     from .grid import DecompositionError, Grid

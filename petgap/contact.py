@@ -166,6 +166,10 @@ class ContactProblem:
         #: Gap scale of the KKT residual, ``h0``.
         self.gap_scale = self.rms_height
         self.operator_applications = 0
+        #: The block-averaged problem of :func:`petgap.coarse.coarse_problem`,
+        #: made on first use and kept for the steps of a sweep (False: not yet
+        #: looked for; None: this grid is not coarsened).
+        self._coarse = False
 
     # ------------------------------------------------------------ operators
     def elastic_pressure(self, gap, out=None):
