@@ -235,13 +235,12 @@ def main():
                 # solve, whose own operator applications are not counted here).
                 def iterating(r):
                     return r["wall_time"] - r.get("start_time", 0.0)
-                ratios = []
-                for k, r in enumerate(runs):
-                    applications = max(r["operator_applications"], 1)
-                    ratios.append(iterating(r) / applications / (0.5 * (floors[k] + floors[k + 1])))
+                # per application, over the mean of the floors before and after
+                per_floor = [1.0 / max(r["operator_applications"], 1)
+                             / (0.5 * (floors[k] + floors[k + 1])) for k, r in enumerate(runs)]
+                ratios = [iterating(r) * f for r, f in zip(runs, per_floor)]
                 operator_ratio = statistics.median(
-                    r["operator_seconds"] / max(r["operator_applications"], 1)
-                    / (0.5 * (floors[k] + floors[k + 1])) for k, r in enumerate(runs))
+                    r["operator_seconds"] * f for r, f in zip(runs, per_floor))
                 rest = statistics.median(1.0 - r["operator_seconds"] / iterating(r) for r in runs)
                 runs.sort(key=lambda r: r["wall_time"])
                 res = runs[len(runs) // 2]

@@ -266,9 +266,10 @@ def merge(index_t[::1] idx, index_t[::1] pidx, double[::1] pS, double[::1] tS, P
 
     ``idx, pidx, pS, tS`` are buffers whose first ``size`` entries hold S; their
     length must be at least the number of points kept plus the number of added
-    points with a positive pressure (``size + len(added)`` always suffices).  ``added`` (sorted, disjoint from S) enter with pressure
-    ``added_p`` (those with ``added_p <= 0`` stay out) and a zero direction.
-    ``mask`` is updated.  Returns the new size.
+    points with a positive pressure (``size + len(added)`` always suffices).
+    ``added`` (sorted, disjoint from S) enter with pressure ``added_p`` (those
+    with ``added_p <= 0`` stay out) and a zero direction.  ``mask`` is updated.
+    Returns the new size.
 
     Working in place is what keeps the set's memory to one copy: S is first
     compacted forwards (the write position never passes the read position),

@@ -34,6 +34,10 @@ Conventions
 import numpy as np
 from mpi4py import MPI
 
+from .contact import ContactProblem
+from .elastic import ElasticHalfSpace
+from .grid import DecompositionError, Grid
+
 #: Smallest side of a coarse grid, in points (below it the uniform start is cheap).
 MIN_SIDE = 32
 #: Coarse solves stop here (or at the fine tolerance if that is looser): a
@@ -62,10 +66,6 @@ def coarse_problem(problem):
     """
     if problem._coarse is not False:
         return problem._coarse
-    from .contact import ContactProblem
-    from .elastic import ElasticHalfSpace
-    from .grid import DecompositionError, Grid
-
     grid = problem.grid
     f = coarsening_factor(grid.shape)
     coarse = None
@@ -79,7 +79,6 @@ def coarse_problem(problem):
             h = restrict(grid, cgrid, problem.topography, f)
             coarse = ContactProblem(cgrid, h, ElasticHalfSpace(
                 cgrid, problem.half_space.contact_modulus), problem.interaction)
-            coarse.factor = f
     problem._coarse = coarse
     return coarse
 
@@ -150,7 +149,7 @@ def coarse_start(problem, control, tolerance, max_iterations):
     Returns ``(None, "")`` when the grid is not coarsened (the caller's own
     cold start applies) or the coarse solve produced NaN.  Collective.
     """
-    from .polonsky_keer import polonsky_keer
+    from .polonsky_keer import polonsky_keer  # which imports this module
 
     coarse = coarse_problem(problem)
     if coarse is None:
@@ -164,4 +163,5 @@ def coarse_start(problem, control, tolerance, max_iterations):
                    + (f"; {solution.start}" if solution.start.startswith("coarse") else ""))
     if not finite:
         return None, description + " (NaN: not used)"
-    return prolong(coarse.grid, problem.grid, pressure, coarse.factor), description
+    factor = problem.grid.nx // coarse.grid.nx
+    return prolong(coarse.grid, problem.grid, pressure, factor), description

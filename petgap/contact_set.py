@@ -8,11 +8,12 @@ them are in ``petgap/_contact_set.pyx``.
 
 Why a class around five arrays: memory.  A cold start from a uniform pressure
 puts about 60 % of the points in ``S`` after its first step, and the set then
-shrinks to the few percent that carry the load.  The vectors therefore live in buffers with spare capacity,
-updated in place by :func:`petgap._contact_set.merge` (never two copies of the
-set at once), grown one array at a time when points enter beyond the
-capacity, and shrunk one array at a time when the set has fallen well below
-it, so that the peak is one copy of the largest set plus one array in transit.
+shrinks to the few percent that carry the load.  The vectors therefore live in
+buffers with spare capacity, updated in place by
+:func:`petgap._contact_set.merge` (never two copies of the set at once), grown
+one array at a time when points enter beyond the capacity, and shrunk one array
+at a time when the set has fallen well below it, so that the peak is one copy
+of the largest set plus one array in transit.
 """
 import numpy as np
 
@@ -22,6 +23,11 @@ from . import _contact_set as _cs
 INDEX = np.int32
 _SHRINK_BELOW = 0.25  # shrink when the set fills less than this of its buffers
 _SPARE = 1.5          # capacity given on growing or shrinking, times the set size
+
+
+def _view(name):
+    """A property: the first ``size`` entries of the buffer ``name``."""
+    return property(lambda self: getattr(self, name)[:self.size])
 
 
 class ContactSet:
@@ -86,25 +92,11 @@ class ContactSet:
         return contact
 
     # Views of the first ``size`` entries: what the kernels see.
-    @property
-    def idx(self):
-        return self._idx[:self.size]
-
-    @property
-    def pidx(self):
-        return self._pidx[:self.size]
-
-    @property
-    def p(self):
-        return self._p[:self.size]
-
-    @property
-    def t(self):
-        return self._t[:self.size]
-
-    @property
-    def g(self):
-        return self._g[:self.size]
+    idx = _view("_idx")
+    pidx = _view("_pidx")
+    p = _view("_p")
+    t = _view("_t")
+    g = _view("_g")
 
     @property
     def capacity(self):

@@ -48,6 +48,7 @@ class ElasticHalfSpace:
         # Factors folding in the 1/N of the inverse transform.
         self._stiffness = contact_modulus / (2.0 * n)
         self._compliance = 2.0 / (contact_modulus * n)
+        self._point_stiffness = None  # computed on first use (collective)
 
     def _apply(self, field, scale, power, out):
         grid = self.grid
@@ -96,7 +97,7 @@ class ElasticHalfSpace:
         of that point, so that their steps do not depend on the unit system.
         Collective: every rank must call it; computed once and cached.
         """
-        if getattr(self, "_point_stiffness", None) is None:
+        if self._point_stiffness is None:
             grid = self.grid
             local = sum(float(w) * float(np.hypot(grid.qx, qy).sum())
                         for w, qy in zip(grid.hermitian_weight, grid.qy))

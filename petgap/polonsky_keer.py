@@ -64,6 +64,7 @@ import numpy as np
 from mpi4py import MPI
 
 from . import _contact_set as _cs
+from . import coarse
 from .contact import Load, MeanGap, Timer, judge
 from .contact_set import INDEX, ContactSet
 
@@ -128,8 +129,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     start = "warm" if initial_pressure is not None else ""
     owned = False  # may initial_pressure be overwritten (it is ours, not the caller's)?
     if initial_pressure is None and coarse_start:
-        from .coarse import coarse_start as solve_coarse
-        initial_pressure, start = solve_coarse(problem, control, tolerance, max_iterations)
+        initial_pressure, start = coarse.coarse_start(problem, control, tolerance,
+                                                      max_iterations)
         owned = initial_pressure is not None
     start_time = timer()
     if initial_pressure is None:
