@@ -6,10 +6,6 @@ exchange between the two decompositions is exercised under ``mpirun -n 2``);
 the coarse start must reach the state the uniform start reaches, in fewer
 iterations, and the same state on one rank as on two.
 """
-import json
-import sys
-import textwrap
-
 import numpy as np
 import pytest
 from mpi4py import MPI
@@ -20,7 +16,8 @@ from petgap.elastic import ElasticHalfSpace
 from petgap.grid import Grid
 from petgap.polonsky_keer import polonsky_keer
 from petgap.surface import self_affine
-from test_contact import E_STAR, assert_same_state, max_abs, tolerance_scales
+from test_contact import (E_STAR, assert_same_state, max_abs, solve_on_three_ranks,
+                          tolerance_scales)
 
 
 def make_grid(shape, comm, size=None):
@@ -101,54 +98,19 @@ def test_coarse_start_on_two_ranks_equals_one(comm, control):
     assert many.contact_fraction == one.contact_fraction
 
 
-THREE_RANK_SCRIPT = textwrap.dedent("""
-    import json, sys
-    from pathlib import Path
-    import numpy as np
-    from mpi4py import MPI
-    from petgap.contact import ContactProblem, Load, MeanGap
-    from petgap.elastic import ElasticHalfSpace
-    from petgap.grid import Grid
-    from petgap.polonsky_keer import polonsky_keer
-
-    out = Path(sys.argv[1])
-    comm = MPI.COMM_WORLD
-    h = np.load(out / "h.npy")
-    grid = Grid(h.shape, size={size!r}, comm=comm, planner="estimate")
-    problem = ContactProblem(grid, grid.local_part(h).copy(), ElasticHalfSpace(grid, {e!r}))
-    controls = [Load(0.02 * problem.pressure_scale), MeanGap(0.8 * problem.rms_height)]
-    for k, control in enumerate(controls):
-        sol = polonsky_keer(problem, control, tolerance=1e-10)
-        gap, pressure = grid.gather(sol.gap), grid.gather(sol.pressure)
-        if comm.rank == 0:
-            np.save(out / f"gap{{k}}.npy", gap)
-            np.save(out / f"pressure{{k}}.npy", pressure)
-            (out / f"scalars{{k}}.json").write_text(json.dumps(
-                {{"iterations": sol.iterations, "start": sol.start, "converged": sol.converged}}))
-""")
-
-
 def test_coarse_start_on_three_ranks_equals_one(comm, mpi_tmp_path, run_cli):
     """134 rows on 3 ranks: fine 45 + 45 + 44, coarse 23 + 23 + 21: coarse row 22 sums fine
     rows of two ranks, and the two grids' slabs are cut at different rows."""
     shape, size = (134, 64), (2.09375, 1.0)
     serial = make_grid(shape, MPI.COMM_SELF, size=size)
     h = self_affine(serial, 0.8, 8 * serial.dx, 0.5, rms_slope=0.1, seed=6)
-    if comm.rank == 0:
-        np.save(mpi_tmp_path / "h.npy", h)
-        (mpi_tmp_path / "solve3.py").write_text(THREE_RANK_SCRIPT.format(size=size, e=E_STAR))
-    comm.Barrier()
-    result = run_cli([sys.executable, mpi_tmp_path / "solve3.py", mpi_tmp_path], ranks=3,
-                     timeout=120)
-    assert result.returncode == 0, result.stderr[-3000:]
+    three = solve_on_three_ranks(comm, mpi_tmp_path, run_cli, h, size, solver="polonsky_keer")
     problem = ContactProblem(serial, h, ElasticHalfSpace(serial, E_STAR))
     controls = [Load(0.02 * problem.pressure_scale), MeanGap(0.8 * problem.rms_height)]
-    for k, control in enumerate(controls):
+    for (gap, pressure, scalars), control in zip(three, controls):
         one = polonsky_keer(problem, control, tolerance=1e-10)
-        three = json.loads((mpi_tmp_path / f"scalars{k}.json").read_text())
-        assert one.converged and three["converged"] and one.start.startswith("coarse 67x32")
-        assert three["iterations"] == one.iterations and three["start"] == one.start
-        gap = np.load(mpi_tmp_path / f"gap{k}.npy")
-        pressure = np.load(mpi_tmp_path / f"pressure{k}.npy")
+        assert scalars["ranks"] == 3 and scalars["converged"] and one.converged
+        assert one.start.startswith("coarse 67x32")
+        assert scalars["iterations"] == one.iterations and scalars["start"] == one.start
         assert np.abs(gap - one.gap).max() <= 1e-12 * problem.gap_scale
         assert np.abs(pressure - one.pressure).max() <= 1e-12 * problem.pressure_scale

@@ -602,43 +602,54 @@ THREE_RANK_SCRIPT = textwrap.dedent("""
     from petgap.contact import ContactProblem, Load, MeanGap
     from petgap.elastic import ElasticHalfSpace
     from petgap.grid import Grid
+    from petgap.polonsky_keer import polonsky_keer
     from petgap.solver import solve
 
-    out = Path(sys.argv[1])
+    out, name = Path(sys.argv[1]), sys.argv[2]
+    size, modulus = tuple(json.loads(sys.argv[3])), float(sys.argv[4])
+    solver = {"solve": solve, "polonsky_keer": polonsky_keer}[name]
     comm = MPI.COMM_WORLD
     h = np.load(out / "h.npy")
-    grid = Grid(h.shape, size=({lx!r}, {ly!r}), comm=comm, planner="estimate")
-    problem = ContactProblem(grid, grid.local_part(h).copy(), ElasticHalfSpace(grid, {e!r}))
+    grid = Grid(h.shape, size=size, comm=comm, planner="estimate")
+    problem = ContactProblem(grid, grid.local_part(h).copy(), ElasticHalfSpace(grid, modulus))
     controls = [Load(0.02 * problem.pressure_scale), MeanGap(0.8 * problem.rms_height)]
     for k, control in enumerate(controls):
-        sol = solve(problem, control, tolerance=1e-10)
+        sol = solver(problem, control, tolerance=1e-10)
         gap, pressure = grid.gather(sol.gap), grid.gather(sol.pressure)
         if comm.rank == 0:
-            np.save(out / f"gap{{k}}.npy", gap)
-            np.save(out / f"pressure{{k}}.npy", pressure)
-            scalars = {{key: (v if isinstance(v, (bool, str)) else float(v))
-                       for key, v in sol.scalars().items()}}
+            np.save(out / f"gap{k}.npy", gap)
+            np.save(out / f"pressure{k}.npy", pressure)
+            scalars = {key: (v if isinstance(v, (bool, str)) else float(v))
+                       for key, v in sol.scalars().items()}
             scalars["ranks"] = comm.size
-            (out / f"scalars{{k}}.json").write_text(json.dumps(scalars))
-""").format(lx=RANK_SIZE[0], ly=RANK_SIZE[1], e=E_STAR)
+            (out / f"scalars{k}.json").write_text(json.dumps(scalars))
+""")
+
+
+def solve_on_three_ranks(comm, tmp, run_cli, h, size, solver="solve"):
+    """The two controls of :func:`_rank_controls` solved on 3 ranks, in a subprocess.
+
+    ``solver`` names the function (``solve`` or ``polonsky_keer``); tolerance
+    1e-10.  Returns ``(gap, pressure, scalars)`` per control, the fields global.
+    """
+    if comm.rank == 0:
+        np.save(tmp / "h.npy", h)
+        (tmp / "solve3.py").write_text(THREE_RANK_SCRIPT)
+    comm.Barrier()
+    result = run_cli([sys.executable, tmp / "solve3.py", tmp, solver, json.dumps(list(size)),
+                      E_STAR], ranks=3, timeout=120)
+    assert result.returncode == 0, result.stderr[-3000:]
+    return [(np.load(tmp / f"gap{k}.npy"), np.load(tmp / f"pressure{k}.npy"),
+             json.loads((tmp / f"scalars{k}.json").read_text())) for k in range(2)]
 
 
 def test_three_ranks_equal_one(comm, mpi_tmp_path, run_cli):
     serial, h = _serial_topography()
-    if comm.rank == 0:
-        np.save(mpi_tmp_path / "h.npy", h)
-        (mpi_tmp_path / "solve3.py").write_text(THREE_RANK_SCRIPT)
-    comm.Barrier()
-    result = run_cli([sys.executable, mpi_tmp_path / "solve3.py", mpi_tmp_path], ranks=3,
-                     timeout=120)
-    assert result.returncode == 0, result.stderr[-3000:]
+    three = solve_on_three_ranks(comm, mpi_tmp_path, run_cli, h, RANK_SIZE)
     serial_problem = ContactProblem(serial, h, ElasticHalfSpace(serial, E_STAR))
-    for k, control in enumerate(_rank_controls(serial_problem)):
+    for (gap, pressure, scalars), control in zip(three, _rank_controls(serial_problem)):
         one = solve(serial_problem, control, tolerance=1e-10)
-        scalars = json.loads((mpi_tmp_path / f"scalars{k}.json").read_text())
         assert scalars["ranks"] == 3 and scalars["converged"]
-        gap = np.load(mpi_tmp_path / f"gap{k}.npy")
-        pressure = np.load(mpi_tmp_path / f"pressure{k}.npy")
         _assert_round_off(serial, serial_problem, one, gap, pressure, scalars)
 
 
