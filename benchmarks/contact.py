@@ -73,14 +73,16 @@ def worker(args):
     # Time spent in the elastic operator itself (the transform pairs of the
     # pressure solver), to split an evaluation's cost into the pair and the rest.
     operator_seconds = [0.0]
-    apply_in_buffer = half_space.apply_in_buffer
 
-    def timed_apply(*a, **k):
-        t = time.perf_counter()
-        out = apply_in_buffer(*a, **k)
-        operator_seconds[0] += time.perf_counter() - t
-        return out
-    half_space.apply_in_buffer = timed_apply
+    def timed(apply):
+        def timed_apply(*a, **k):
+            t = time.perf_counter()
+            out = apply(*a, **k)
+            operator_seconds[0] += time.perf_counter() - t
+            return out
+        return timed_apply
+    half_space.apply_in_buffer = timed(half_space.apply_in_buffer)
+    half_space.apply_sparse = timed(half_space.apply_sparse)
     options = {"petgap_coarse_start": "0"} if args.no_coarse else None
     solution = solve(problem, control, solver=args.solver, tolerance=args.tolerance,
                      max_iterations=args.max_iterations, options=options)
@@ -265,7 +267,7 @@ def main():
                 print(f"| {n}^2 | {ranks} | {res['solver']} | {res['iterations']} | {pairs:.2f} | "
                       f"{per_it:.4f} | {floor:.4f} | {ratio:.2f} | "
                       + (f"{operator_ratio:.2f} | {100 * rest:.0f} % | " if operator_ratio > 0
-                         else "- | - | ")  # solvers that do not use apply_in_buffer
+                         else "- | - | ")  # solvers that do not use these operators
                       + f"{res.get('start_time', 0.0):.2f} | {res['wall_time']:.2f} | "
                       f"{res['contact_fraction']:.4f} | {kkt:.1e} | {res['bytes_per_point']:.0f} | "
                       + " | ".join(t_cols) + " |", flush=True)

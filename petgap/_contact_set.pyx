@@ -8,11 +8,15 @@ them densely makes each iteration stream half a dozen full slabs through
 memory, which at 1024^2 costs about as much as a third FFT pair and evicts the
 FFT buffers from the cache.  Here ``S`` is kept as sorted index lists and the
 quantities on it as compressed vectors, so that an iteration makes a single
-full pass over the slab (:func:`gap_pass`) besides filling the FFT buffer.
+full pass over the slab (:func:`gap_pass`, which only reads) besides the
+transforms, which take their input from the index lists and give their output
+back on them (:meth:`petgap.elastic.ElasticHalfSpace.apply_sparse`).
 
 Index conventions: ``idx`` holds flat indices into this rank's unpadded
-``(nx_local, ny)`` slabs (topography, displacement, contact mask), ``pidx`` the
-matching flat indices into the padded FFT buffer ``(nx_local, 2 (ny // 2 + 1))``.
+``(nx_local, ny)`` slabs (topography, contact mask), ``pidx`` the matching
+flat indices into the padded layout of the FFT buffer,
+``(nx_local, 2 (ny // 2 + 1))``, in which the solver also keeps the
+displacement.
 Both are sorted ascending, so gathers and scatters walk memory forwards.
 They are 32-bit (``numpy.int32``), which halves their share of the set's
 memory; :class:`petgap.contact_set.ContactSet` refuses slabs with 2^31 padded
@@ -26,19 +30,6 @@ import numpy as np
 from libc.string cimport memset
 
 ctypedef int index_t  # numpy.int32: flat indices into one rank's (padded) slab
-
-
-def fill(double[:, ::1] pad, const index_t[::1] pidx, const double[::1] values, double scale):
-    """``pad = scale * values`` on S and 0 elsewhere: the FFT input ``P_S x``."""
-    cdef Py_ssize_t k, ns = pidx.shape[0]
-    cdef double *flat
-    if pad.shape[0] == 0:
-        return
-    flat = &pad[0, 0]
-    with nogil:
-        memset(flat, 0, pad.shape[0] * pad.shape[1] * sizeof(double))
-        for k in range(ns):
-            flat[pidx[k]] = scale * values[k]
 
 
 def gather_gap(const double[:, ::1] src, const index_t[::1] sidx, const double[:, ::1] h,
@@ -78,55 +69,47 @@ def shift_and_norms(double[::1] gS, double shift):
 
 
 def gap_pass(const double[:, ::1] src, const double[:, ::1] h, const unsigned char[:, ::1] mask,
-             double[:, ::1] u, bint store, double offset, double[:, ::1] pad, bint masked_gap,
-             index_t[::1] overlap):
+             double offset, index_t[::1] overlap):
     """The one full pass of an iteration, over the gap ``g = src - h + offset``.
 
-    * ``u = src`` if ``store`` (``src`` is then the FFT buffer holding ``K^{-1} p``);
-    * ``pad = g`` on S and 0 elsewhere if ``masked_gap`` (the input of the
-      preconditioner ``P_S K P_S g``; ``pad`` may be ``src``);
-    * the largest penetration ``max(-g)`` off S, and the flat indices of the
-      points off S with ``g < 0`` written to ``overlap`` (as many as fit).
+    ``src`` holds the displacement in the padded layout (only its first
+    ``h.shape[1]`` columns are read).  Finds the largest penetration
+    ``max(-g)`` off S and writes the flat (unpadded) indices of the points off
+    S with ``g < 0`` to ``overlap`` (as many as fit).  It only reads: the
+    preconditioner takes ``g`` on S from the index lists.
 
     Returns ``(penetration, number of overlap points)``; when the number
     exceeds ``len(overlap)`` the caller grows the buffer and calls
     :func:`collect_overlap`.  A NaN anywhere in ``g`` makes the penetration NaN.
 
     Each row is swept first by a branch-free loop the compiler vectorises
-    (copies, masking, counts); only rows with penetrating points off S are
-    swept again, from cache, to record them.
+    (counts only); only rows with penetrating points off S are swept again,
+    from cache, to record them.
     """
     cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1], cap = overlap.shape[0]
     cdef Py_ssize_t count = 0
     cdef long row_negative, row_nan, nan_total = 0
-    cdef double v, s, pen = 0.0
+    cdef double v, pen = 0.0
     cdef const double *sr
     cdef const double *hr
     cdef const unsigned char *mr
-    cdef double *ur
-    cdef double *pr
+    if src.shape[0] != m or src.shape[1] < n or mask.shape[0] != m or mask.shape[1] != n:
+        raise ValueError("gap_pass: src, h and mask do not describe the same slab")
     with nogil:
         for i in range(m):
             sr = &src[i, 0]
             hr = &h[i, 0]
             mr = &mask[i, 0]
-            ur = &u[i, 0]
-            pr = &pad[i, 0]
             row_negative = 0
             row_nan = 0
             for j in range(n):
-                s = sr[j]
-                v = s - hr[j] + offset
-                if store:
-                    ur[j] = s
-                if masked_gap:
-                    pr[j] = v if mr[j] else 0.0
+                v = sr[j] - hr[j] + offset
                 row_negative += (mr[j] == 0) & (v < 0.0)
                 row_nan += v != v
             nan_total += row_nan
             if row_negative:
                 for j in range(n):
-                    v = (ur[j] if store else sr[j]) - hr[j] + offset
+                    v = sr[j] - hr[j] + offset
                     if mr[j] == 0 and v < 0.0:
                         if count < cap:
                             overlap[count] = i * n + j
@@ -140,7 +123,10 @@ def gap_pass(const double[:, ::1] src, const double[:, ::1] h, const unsigned ch
 
 def collect_overlap(const double[:, ::1] u, const double[:, ::1] h,
                     const unsigned char[:, ::1] mask, double offset, index_t[::1] overlap):
-    """Flat indices of the points off S with ``u - h + offset < 0``; returns their number."""
+    """Flat indices of the points off S with ``u - h + offset < 0``; returns their number.
+
+    ``u`` may be padded (only its first ``h.shape[1]`` columns are read).
+    """
     cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1], cap = overlap.shape[0]
     cdef Py_ssize_t count = 0
     with nogil:
@@ -153,17 +139,13 @@ def collect_overlap(const double[:, ::1] u, const double[:, ::1] h,
     return count
 
 
-def gather_sums(const double[:, ::1] pad, const index_t[::1] pidx, const double[::1] gS):
-    """Returns ``(sum z, sum gS z)`` over S with ``z = pad`` (the preconditioned gap)."""
-    cdef Py_ssize_t k, ns = pidx.shape[0]
+def z_sums(const double[::1] zS, const double[::1] gS):
+    """Returns ``(sum z, sum g z)`` over S: ``z`` the preconditioned gap on S."""
+    cdef Py_ssize_t k, ns = zS.shape[0]
     cdef double z, sz = 0.0, sgz = 0.0
-    cdef const double *pf
-    if ns == 0:
-        return 0.0, 0.0
-    pf = &pad[0, 0]
     with nogil:
         for k in range(ns):
-            z = pf[pidx[k]]
+            z = zS[k]
             sz += z
             sgz += gS[k] * z
     return sz, sgz
@@ -240,10 +222,12 @@ def overlap_pressures(const double[:, ::1] u, const double[:, ::1] h, const inde
                       double offset, double entry, double[::1] out):
     """``out = -entry g`` at the overlap points off S, ``g = u - h + offset``; returns the sum.
 
-    ``entry`` has the units of a stiffness (pressure per length): the caller
-    chooses it so that a penetration becomes a pressure of the right scale.
+    ``points`` are flat indices into ``h``'s unpadded slab; ``u`` may be
+    padded.  ``entry`` has the units of a stiffness (pressure per length): the
+    caller chooses it so that a penetration becomes a pressure of the right
+    scale.
     """
-    cdef Py_ssize_t k, np_ = points.shape[0]
+    cdef Py_ssize_t k, q, np_ = points.shape[0], n = h.shape[1], w = u.shape[1]
     cdef double v, s = 0.0
     cdef const double *uf
     cdef const double *hf
@@ -253,7 +237,8 @@ def overlap_pressures(const double[:, ::1] u, const double[:, ::1] h, const inde
     hf = &h[0, 0]
     with nogil:
         for k in range(np_):
-            v = -entry * (uf[points[k]] - hf[points[k]] + offset)
+            q = points[k]
+            v = -entry * (uf[(q // n) * w + q % n] - hf[q] + offset)
             out[k] = v
             s += v
     return s
@@ -334,16 +319,22 @@ def merge(index_t[::1] idx, index_t[::1] pidx, double[::1] pS, double[::1] tS, P
     return kept + extra
 
 
-def recurrence(double[:, ::1] u, const double[:, ::1] pad, double tau, double scale):
-    """``u = scale (u - tau r)`` with ``r = pad``: the displacement of the updated pressure."""
-    cdef Py_ssize_t i, j, m = u.shape[0], n = u.shape[1]
+def recurrence(double[:, ::1] u, const double[:, ::1] pad, double tau, double scale,
+               Py_ssize_t columns):
+    """``u = scale (u - tau r)`` with ``r = pad``, on the first ``columns`` columns.
+
+    The displacement of the updated pressure, both fields in the padded layout.
+    """
+    cdef Py_ssize_t i, j, m = u.shape[0]
     cdef double *ur
     cdef const double *rr
+    if pad.shape[0] != m or columns > u.shape[1] or columns > pad.shape[1]:
+        raise ValueError("recurrence: u and pad do not describe the same slab")
     with nogil:
         for i in range(m):
             ur = &u[i, 0]
             rr = &pad[i, 0]
-            for j in range(n):
+            for j in range(columns):
                 ur[j] = scale * (ur[j] - tau * rr[j])
 
 
@@ -415,21 +406,25 @@ def uniform_step(const double[:, ::1] pad, const double[:, ::1] h, double hbar, 
     return overlap, clipped, total
 
 
-def final_gap(double[:, ::1] u, const double[:, ::1] h, const unsigned char[:, ::1] mask,
-              double offset):
-    """``u <- g = u - h + offset`` projected onto the contact state found, in place.
+def final_gap(const double[:, ::1] src, const double[:, ::1] h, const unsigned char[:, ::1] mask,
+              double offset, double[:, ::1] out):
+    """``out <- g = src - h + offset`` projected onto the contact state found.
 
-    Returns the gap KKT residuals taken before the projection, ``(max |g| on S,
-    max(-g) off S)``; then ``g = 0`` on S and ``g = max(g, 0)`` elsewhere.  One
-    pass where NumPy took five.  A NaN makes the residual NaN.
+    ``src`` may be padded (the displacement where the solver keeps it).
+    Returns the gap KKT residuals taken before the projection, ``(max |g| on
+    S, max(-g) off S)``; then ``g = 0`` on S and ``g = max(g, 0)`` elsewhere.
+    One pass where NumPy took five.  A NaN makes the residual NaN.
     """
     cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1]
     cdef double v, a, on = 0.0, off = 0.0
     cdef long nan = 0
+    if (src.shape[0] != m or src.shape[1] < n or out.shape[0] != m or out.shape[1] != n
+            or mask.shape[0] != m or mask.shape[1] != n):
+        raise ValueError("final_gap: src, h, mask and out do not describe the same slab")
     with nogil:
         for i in range(m):
             for j in range(n):
-                v = u[i, j] - h[i, j] + offset
+                v = src[i, j] - h[i, j] + offset
                 nan += v != v
                 if mask[i, j]:
                     a = v if v >= 0.0 else -v
@@ -441,7 +436,7 @@ def final_gap(double[:, ::1] u, const double[:, ::1] h, const unsigned char[:, :
                         off = -v
                     if v < 0.0:
                         v = 0.0
-                u[i, j] = v
+                out[i, j] = v
     if nan:
         return float("nan"), float("nan")   # reported, never hidden
     return on, off

@@ -16,7 +16,7 @@ first axis.  Transforms are unnormalised: forward then backward multiplies by
 ``n0 * n1``.
 """
 from libc.math cimport sqrt
-from libc.string cimport memcpy
+from libc.string cimport memcpy, memset
 from mpi4py.libmpi cimport MPI_Comm
 from mpi4py cimport MPI
 cimport numpy as cnp
@@ -50,19 +50,25 @@ cdef extern from "fftw3-mpi.h" nogil:
     fftw_plan fftw_plan_many_dft_c2r(int rank, const int *n, int howmany, fftw_complex *inp,
                                      const int *inembed, int istride, int idist, double *out,
                                      const int *onembed, int ostride, int odist, unsigned flags)
-    fftw_plan fftw_plan_dft_1d(int n, fftw_complex *inp, fftw_complex *out, int sign,
-                               unsigned flags)
+    fftw_plan fftw_plan_many_dft(int rank, const int *n, int howmany, fftw_complex *inp,
+                                 const int *inembed, int istride, int idist, fftw_complex *out,
+                                 const int *onembed, int ostride, int odist, int sign,
+                                 unsigned flags)
     fftw_plan fftw_mpi_plan_many_transpose(ptrdiff_t n0, ptrdiff_t n1, ptrdiff_t howmany,
                                            ptrdiff_t block0, ptrdiff_t block1, double *inp,
                                            double *out, MPI_Comm comm, unsigned flags)
     void *fftw_malloc(size_t n)
     void fftw_execute(const fftw_plan p)
+    void fftw_execute_dft(const fftw_plan p, fftw_complex *inp, fftw_complex *out)
+    void fftw_execute_dft_r2c(const fftw_plan p, double *inp, fftw_complex *out)
+    void fftw_execute_dft_c2r(const fftw_plan p, fftw_complex *inp, double *out)
     void fftw_destroy_plan(fftw_plan p)
     void fftw_mpi_broadcast_wisdom(MPI_Comm comm)
     void fftw_mpi_gather_wisdom(MPI_Comm comm)
     char *fftw_export_wisdom_to_string()
     int fftw_import_wisdom_from_string(const char *s)
     void fftw_free(void *p)
+    int fftw_alignment_of(double *p)
 
 fftw_mpi_init()
 
@@ -187,6 +193,17 @@ cdef class SlabPlans:
         _destroy(&self.bwd)
 
 
+ctypedef int index_t  # numpy.int32, as in petgap/_contact_set.pyx: flat padded-slab indices
+
+#: Rows the sparse variants of :class:`ConvolutionPlans` assemble (or take
+#: apart) at a time in a small buffer that stays in cache.  A multiple of 8
+#: keeps every block's start in the Fourier slab 64-byte aligned (8 rows of
+#: ``nky`` complex values are ``128 nky`` bytes), as FFTW's new-array execute
+#: requires of the arrays a plan was made for.
+cdef enum:
+    BLOCK_ROWS = 8
+
+
 cdef class ConvolutionPlans:
     """``x <- F^{-1} [scale |q|^power F x]`` in the padded real slab, in one sweep.
 
@@ -197,11 +214,18 @@ cdef class ConvolutionPlans:
     transforms are taken apart the way FFTW-MPI builds them (FFTW manual 6.4.3):
     1D r2c transforms along the local rows, a global transpose, 1D transforms
     along the rows of the transposed slab, and the reverse.  The middle stage is
-    fused row by row -- forward 1D transform, multiplication, backward 1D
-    transform on one row held in cache -- so that the Fourier slab is read and
-    written once there instead of three times.  The transposed layout and the
+    fused a few rows at a time -- forward 1D transforms, multiplication,
+    backward 1D transforms on ``BLOCK_ROWS`` rows held in cache, in place -- so
+    that the Fourier slab is read and written once there instead of three
+    times.  The transposed layout and the
     normalisation are those of :class:`SlabPlans` (unnormalised; the caller's
     ``scale`` folds in ``1 / (n0 n1)``), and the q = 0 mode is set to zero.
+
+    Taken apart, the first and last stages can also meet a field that lives
+    on a few points only (:meth:`apply_sparse`): the rows of the input are
+    assembled a block at a time from index lists in a buffer held in cache,
+    instead of being written to the slab and read back, and the output is
+    written where the caller wants it or gathered on those points alone.
 
     Parameters are those of :class:`SlabPlans` plus the local row counts
     ``local_n0`` (real rows) and ``local_n1`` (transposed Fourier rows), both
@@ -213,19 +237,25 @@ cdef class ConvolutionPlans:
     cdef fftw_plan rows_bwd
     cdef fftw_plan transpose_fwd
     cdef fftw_plan transpose_bwd
-    cdef fftw_plan line_fwd
-    cdef fftw_plan line_bwd
-    cdef fftw_complex *line
+    cdef fftw_plan lines_fwd[2]   # BLOCK_ROWS lines of the transposed slab, and the rest
+    cdef fftw_plan lines_bwd[2]
+    cdef fftw_plan block_fwd[2]   # BLOCK_ROWS rows, and the remainder (or NULL)
+    cdef fftw_plan block_bwd[2]
+    cdef double *block
     cdef double *real_data
     cdef fftw_complex *fourier_data
-    cdef Py_ssize_t n0, ln1
+    cdef Py_ssize_t n0, ln0, ln1, nky
+    cdef Py_ssize_t block_rows, block_lines   # rows of the plans [0]: min(BLOCK_ROWS, local)
     cdef object comm, real, fourier
 
     def __cinit__(self):
         self.rows_fwd = self.rows_bwd = NULL
         self.transpose_fwd = self.transpose_bwd = NULL
-        self.line_fwd = self.line_bwd = NULL
-        self.line = NULL
+        self.lines_fwd[0] = self.lines_fwd[1] = NULL
+        self.lines_bwd[0] = self.lines_bwd[1] = NULL
+        self.block_fwd[0] = self.block_fwd[1] = NULL
+        self.block_bwd[0] = self.block_bwd[1] = NULL
+        self.block = NULL
 
     def __init__(self, MPI.Comm comm, Py_ssize_t n0, Py_ssize_t n1, Py_ssize_t local_n0,
                  Py_ssize_t local_n1, cnp.ndarray real, cnp.ndarray fourier,
@@ -234,18 +264,28 @@ cdef class ConvolutionPlans:
         if local_n0 <= 0 or local_n1 <= 0:
             raise ValueError("every rank needs at least one real and one Fourier row")
         self.comm, self.real, self.fourier = comm, real, fourier
-        self.n0, self.ln1 = n0, local_n1
+        self.n0, self.ln0, self.ln1 = n0, local_n0, local_n1
+        self.nky = n1 // 2 + 1
+        self.block_rows = min(BLOCK_ROWS, local_n0)
+        self.block_lines = min(BLOCK_ROWS, local_n1)
         cdef unsigned flags = PLANNER_FLAGS[planner]
         cdef int n = <int>n1
         cdef int nky = <int>(n1 // 2 + 1)
         cdef int howmany = <int>local_n0
         cdef int line_length = <int>n0
+        cdef int rows[2]
+        rows[0] = <int>min(BLOCK_ROWS, local_n0)
+        rows[1] = <int>(local_n0 % BLOCK_ROWS) if local_n0 > BLOCK_ROWS else 0
         cdef MPI_Comm mcomm = comm.ob_mpi
         self.real_data = <double *>cnp.PyArray_DATA(real)
         self.fourier_data = <fftw_complex *>cnp.PyArray_DATA(fourier)
-        self.line = <fftw_complex *>fftw_malloc(n0 * sizeof(fftw_complex))
-        if self.line == NULL:
-            raise MemoryError("no memory for one Fourier row")
+        cdef int lines[2]
+        lines[0] = <int>min(BLOCK_ROWS, local_n1)
+        lines[1] = <int>(local_n1 % BLOCK_ROWS) if local_n1 > BLOCK_ROWS else 0
+        cdef fftw_complex *transposed = <fftw_complex *>self.real_data
+        self.block = <double *>fftw_malloc(BLOCK_ROWS * 2 * nky * sizeof(double))
+        if self.block == NULL:
+            raise MemoryError("no memory for a block of rows")
         with nogil:
             # real (local_n0, 2 nky) doubles -> fourier (local_n0, nky) complex
             self.rows_fwd = fftw_plan_many_dft_r2c(1, &n, howmany, self.real_data, NULL, 1,
@@ -255,37 +295,68 @@ cdef class ConvolutionPlans:
             self.transpose_fwd = fftw_mpi_plan_many_transpose(
                 n0, nky, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
                 <double *>self.fourier_data, self.real_data, mcomm, flags)
-            self.line_fwd = fftw_plan_dft_1d(line_length, self.line, self.line, FFTW_FORWARD,
-                                             flags)
-            self.line_bwd = fftw_plan_dft_1d(line_length, self.line, self.line, FFTW_BACKWARD,
-                                             flags)
+            # BLOCK_ROWS rows of the transposed slab at a time, in place
+            for k in range(2):
+                if lines[k] > 0:
+                    self.lines_fwd[k] = fftw_plan_many_dft(
+                        1, &line_length, lines[k], transposed, NULL, 1, line_length,
+                        transposed, NULL, 1, line_length, FFTW_FORWARD, flags)
+                    self.lines_bwd[k] = fftw_plan_many_dft(
+                        1, &line_length, lines[k], transposed, NULL, 1, line_length,
+                        transposed, NULL, 1, line_length, FFTW_BACKWARD, flags)
             self.transpose_bwd = fftw_mpi_plan_many_transpose(
                 nky, n0, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
                 self.real_data, <double *>self.fourier_data, mcomm, flags)
             self.rows_bwd = fftw_plan_many_dft_c2r(1, &n, howmany, self.fourier_data, NULL, 1,
                                                    nky, self.real_data, NULL, 1, 2 * nky,
                                                    flags | FFTW_DESTROY_INPUT)
+            # The same row stages on a block of rows held in self.block (same
+            # padded layout), executed on the Fourier rows of each block in turn.
+            for k in range(2):
+                if rows[k] > 0:
+                    self.block_fwd[k] = fftw_plan_many_dft_r2c(
+                        1, &n, rows[k], self.block, NULL, 1, 2 * nky, self.fourier_data, NULL,
+                        1, nky, flags)
+                    self.block_bwd[k] = fftw_plan_many_dft_c2r(
+                        1, &n, rows[k], self.fourier_data, NULL, 1, nky, self.block, NULL, 1,
+                        2 * nky, flags | FFTW_DESTROY_INPUT)
         if (self.rows_fwd == NULL or self.rows_bwd == NULL or self.transpose_fwd == NULL
-                or self.transpose_bwd == NULL or self.line_fwd == NULL or self.line_bwd == NULL):
+                or self.transpose_bwd == NULL
+                or self.lines_fwd[0] == NULL or self.lines_bwd[0] == NULL
+                or (lines[1] > 0 and (self.lines_fwd[1] == NULL or self.lines_bwd[1] == NULL))
+                or self.block_fwd[0] == NULL or self.block_bwd[0] == NULL
+                or (rows[1] > 0 and (self.block_fwd[1] == NULL or self.block_bwd[1] == NULL))):
             raise RuntimeError(f"FFTW-MPI could not plan a {n0} x {n1} convolution")
 
-    def apply(self, const double[::1] qx, const double[::1] qy, double scale, int power):
-        """Multiply by ``scale |q|^power`` (``power`` +1 or -1) between the transforms."""
-        cdef Py_ssize_t i, j, n0 = self.n0
-        cdef double qyj, f
-        cdef double *s = <double *>self.line
-        cdef fftw_complex *row
-        if qx.shape[0] != n0 or qy.shape[0] != self.ln1:
+    cdef int _check_multiplier(self, const double[::1] qx, const double[::1] qy,
+                               int power) except -1:
+        if qx.shape[0] != self.n0 or qy.shape[0] != self.ln1:
             raise ValueError("wavevector arrays do not match the Fourier slab")
         if power != 1 and power != -1:
             raise ValueError("power must be +1 or -1")
-        with nogil:
-            fftw_execute(self.rows_fwd)
-            fftw_execute(self.transpose_fwd)
-            for j in range(self.ln1):
-                row = (<fftw_complex *>self.real_data) + j * n0
-                memcpy(self.line, row, n0 * sizeof(fftw_complex))
-                fftw_execute(self.line_fwd)
+        return 0
+
+    cdef void _middle(self, const double *qx, const double *qy, double scale,
+                      int power) noexcept nogil:
+        """Fourier rows -> (transpose, 1D transforms and multiplier, transpose) -> Fourier rows.
+
+        The rows of the transposed slab are transformed in place, BLOCK_ROWS
+        at a time (in cache), multiplied, and transformed back.
+        """
+        cdef Py_ssize_t i, j, j0, m, n0 = self.n0
+        cdef double qyj, f
+        cdef double *s
+        cdef fftw_complex *rows
+        cdef int which
+        fftw_execute(self.transpose_fwd)
+        j0 = 0
+        while j0 < self.ln1:
+            m = min(<Py_ssize_t>BLOCK_ROWS, self.ln1 - j0)
+            which = 0 if m == self.block_lines else 1
+            rows = (<fftw_complex *>self.real_data) + j0 * n0
+            fftw_execute_dft(self.lines_fwd[which], rows, rows)
+            for j in range(j0, j0 + m):
+                s = <double *>((<fftw_complex *>self.real_data) + j * n0)
                 qyj = qy[j] * qy[j]
                 if power == 1:
                     for i in range(n0):
@@ -302,20 +373,114 @@ cdef class ConvolutionPlans:
                         if qx[i] == 0.0:
                             s[2 * i] = 0.0
                             s[2 * i + 1] = 0.0
-                fftw_execute(self.line_bwd)
-                memcpy(row, self.line, n0 * sizeof(fftw_complex))
-            fftw_execute(self.transpose_bwd)
+            fftw_execute_dft(self.lines_bwd[which], rows, rows)
+            j0 += BLOCK_ROWS
+        fftw_execute(self.transpose_bwd)
+
+    def apply(self, const double[::1] qx, const double[::1] qy, double scale, int power):
+        """Multiply by ``scale |q|^power`` (``power`` +1 or -1) between the transforms."""
+        self._check_multiplier(qx, qy, power)
+        with nogil:
+            fftw_execute(self.rows_fwd)
+            self._middle(&qx[0], &qy[0], scale, power)
             fftw_execute(self.rows_bwd)
+
+    def apply_sparse(self, const index_t[::1] pidx, const double[::1] values,
+                     const double[::1] qx, const double[::1] qy, double scale, int power,
+                     double[:, ::1] out=None, double[::1] gathered=None):
+        """The convolution of a field that is zero except at the points ``pidx``.
+
+        Parameters
+        ----------
+        pidx : int32 array, sorted ascending
+            Flat indices of the points into this rank's padded real slab
+            (``local_n0 x 2 (n1 // 2 + 1)``, row-major).
+        values : float64 array, ``len(pidx)``
+            The field at those points.
+        qx, qy, scale, power
+            The multiplier, as in :meth:`apply`.
+        out : float64 array, padded slab shape, optional
+            Where the result goes (default: the real buffer).  It must be
+            aligned like the real buffer (``grid.aligned_padded()`` is);
+            its padding columns are left as they are.
+        gathered : float64 array, ``len(pidx)``, optional
+            Instead of a whole slab, only the result at the points ``pidx``
+            (the real buffer and ``out`` are then left untouched).
+
+        The input is assembled ``BLOCK_ROWS`` rows at a time in a buffer that
+        stays in cache and transformed from there; a gathered output is taken
+        apart the same way.  Neither the slab-sized zeroing and scatter of the
+        input nor the slab-sized write of the output goes through memory.
+        """
+        self._check_multiplier(qx, qy, power)
+        cdef Py_ssize_t ns = pidx.shape[0], pw = 2 * self.nky, ln0 = self.ln0
+        cdef Py_ssize_t i0, k, m, base, end
+        cdef double *target = self.real_data
+        cdef double *g = NULL
+        cdef bint ok = True
+        if values.shape[0] != ns or (gathered is not None and gathered.shape[0] != ns):
+            raise ValueError("pidx, values and gathered must have the same length")
+        if out is not None:
+            if out.shape[0] != ln0 or out.shape[1] != pw:
+                raise ValueError(f"out has shape {tuple(out.shape)[:2]}, the padded slab is "
+                                 f"({ln0}, {pw})")
+            target = &out[0, 0]
+            if fftw_alignment_of(target) != fftw_alignment_of(self.real_data):
+                raise ValueError("out is not aligned like the real FFT buffer")
+        if gathered is not None and ns > 0:
+            g = &gathered[0]
+        with nogil:
+            k = 0
+            i0 = 0
+            while i0 < ln0:
+                m = min(<Py_ssize_t>BLOCK_ROWS, ln0 - i0)
+                base = i0 * pw
+                end = base + m * pw
+                memset(self.block, 0, m * pw * sizeof(double))
+                while k < ns and pidx[k] < end:
+                    if pidx[k] < base:
+                        ok = False  # unsorted or negative: reported below
+                        break
+                    self.block[pidx[k] - base] = values[k]
+                    k += 1
+                fftw_execute_dft_r2c(self.block_fwd[0 if m == self.block_rows else 1], self.block,
+                                     self.fourier_data + i0 * self.nky)
+                i0 += BLOCK_ROWS
+            ok = ok and k == ns
+            # The middle stage is collective (the transposes): every rank runs
+            # it, valid input or not, so that a bad index list raises on its
+            # rank instead of leaving the others waiting in a transpose.
+            self._middle(&qx[0], &qy[0], scale, power)
+            if ok and g == NULL:
+                fftw_execute_dft_c2r(self.rows_bwd, self.fourier_data, target)
+            elif ok:
+                k = 0
+                i0 = 0
+                while i0 < ln0:
+                    m = min(<Py_ssize_t>BLOCK_ROWS, ln0 - i0)
+                    base = i0 * pw
+                    end = base + m * pw
+                    fftw_execute_dft_c2r(self.block_bwd[0 if m == self.block_rows else 1],
+                                         self.fourier_data + i0 * self.nky, self.block)
+                    while k < ns and pidx[k] < end:
+                        g[k] = self.block[pidx[k] - base]
+                        k += 1
+                    i0 += BLOCK_ROWS
+        if not ok:
+            raise ValueError("pidx must be sorted ascending and inside this rank's padded slab")
 
     def __dealloc__(self):
         _destroy(&self.rows_fwd)
         _destroy(&self.rows_bwd)
         _destroy(&self.transpose_fwd)
         _destroy(&self.transpose_bwd)
-        _destroy(&self.line_fwd)
-        _destroy(&self.line_bwd)
-        if self.line != NULL:
-            fftw_free(self.line)
+        for k in range(2):
+            _destroy(&self.lines_fwd[k])
+            _destroy(&self.lines_bwd[k])
+            _destroy(&self.block_fwd[k])
+            _destroy(&self.block_bwd[k])
+        if self.block != NULL:
+            fftw_free(self.block)
 
 
 def weighted_power(const double complex[:, ::1] c, const double[::1] qx,

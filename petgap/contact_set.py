@@ -1,12 +1,12 @@
 """The contact set of the pressure solver: sorted index lists with the fields on them.
 
 :func:`petgap.polonsky_keer.polonsky_keer` keeps the pressure ``p``, its
-conjugate direction ``t`` and the gap ``g`` on the contact set ``S = {p > 0}``
-only, as compressed vectors beside the flat indices of ``S`` in this rank's
+conjugate direction ``t``, the gap ``g`` and the preconditioned gap ``z`` on the
+contact set ``S = {p > 0}`` only, as compressed vectors beside the flat indices of ``S`` in this rank's
 slab (``idx``) and in the padded FFT buffer (``pidx``); the kernels that work on
 them are in ``petgap/_contact_set.pyx``.
 
-Why a class around five arrays: memory.  A cold start from a uniform pressure
+Why a class around six arrays: memory.  A cold start from a uniform pressure
 puts about 60 % of the points in ``S`` after its first step, and the set then
 shrinks to the few percent that carry the load.  The vectors therefore live in
 buffers with spare capacity, updated in place by
@@ -31,7 +31,11 @@ def _view(name):
 
 
 class ContactSet:
-    """``S`` with ``p``, ``t`` and ``g`` on it, stored in place (see the module docstring).
+    """``S`` with ``p``, ``t``, ``g`` and ``z`` on it, stored in place (see the module docstring).
+
+    ``p`` (pressure) and ``t`` (conjugate direction) are kept through a merge;
+    ``g`` (gap) and ``z`` (preconditioned gap) are scratch, refilled by every
+    iteration.
 
     Parameters
     ----------
@@ -41,7 +45,7 @@ class ContactSet:
         Row length of the padded FFT buffer, for ``pidx``.
     """
 
-    _names = ("_idx", "_pidx", "_p", "_t", "_g")
+    _names = ("_idx", "_pidx", "_p", "_t", "_g", "_z")
 
     def __init__(self, mask, padded_width):
         if mask.shape[0] * padded_width > np.iinfo(INDEX).max:
@@ -54,7 +58,7 @@ class ContactSet:
         mask[...] = 0
         self._idx = np.empty(0, dtype=INDEX)
         self._pidx = np.empty(0, dtype=INDEX)
-        self._p, self._t, self._g = np.empty(0), np.empty(0), np.empty(0)
+        self._p, self._t, self._g, self._z = (np.empty(0) for _ in range(4))
 
     @classmethod
     def everywhere(cls, mask, padded_width, pressure):
@@ -72,6 +76,7 @@ class ContactSet:
         contact._p = np.full(n_local, float(pressure))
         contact._t = np.zeros(n_local)
         contact._g = np.empty(n_local)
+        contact._z = np.empty(n_local)
         contact.size = n_local
         mask[...] = 1
         return contact
@@ -97,6 +102,7 @@ class ContactSet:
     p = _view("_p")
     t = _view("_t")
     g = _view("_g")
+    z = _view("_z")
 
     @property
     def capacity(self):
@@ -120,12 +126,12 @@ class ContactSet:
 
     def _resize(self, capacity):
         # One array at a time: the transient is a single array, not a second set.
-        # The gap is scratch, refilled every iteration: nothing of it to keep.
+        # The gap and z are scratch, refilled every iteration: nothing to keep.
         keep = min(self.size, capacity)
         for name in self._names:
             old = getattr(self, name)
             new = np.empty(capacity, dtype=old.dtype)
-            if name != "_g":
+            if name not in ("_g", "_z"):
                 new[:keep] = old[:keep]
             setattr(self, name, new)
             del old

@@ -69,6 +69,21 @@ class ElasticHalfSpace:
             return self.grid.convolve_qpower(self._compliance, -1)
         return self.grid.convolve_qpower(self._stiffness, 1)
 
+    def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None):
+        """Apply ``K`` (or ``K^{-1}``) to a field given on a set of points only.
+
+        The field is ``values`` at the sorted padded-slab indices ``pidx`` and
+        zero elsewhere (a pressure on a contact set, a gap restricted to one);
+        the result goes to the FFT buffer ``grid.real``, to ``out`` (from
+        :meth:`petgap.grid.Grid.aligned_padded`), or only its values at
+        ``pidx`` to ``gathered``.  Same operator as :meth:`apply_in_buffer`
+        without its slab-sized fill and, gathered, its slab-sized output.
+        """
+        if inverse:
+            self.grid.convolve_qpower_sparse(pidx, values, self._compliance, -1, out, gathered)
+        else:
+            self.grid.convolve_qpower_sparse(pidx, values, self._stiffness, 1, out, gathered)
+
     def pressure(self, displacement, out=None):
         """Zero-mean pressure ``p = K u`` that holds the displacement ``u``.
 

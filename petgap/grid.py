@@ -187,6 +187,31 @@ class Grid:
         self._convolution.apply(self.qx, self.qy, scale, power)
         return self.real
 
+    def convolve_qpower_sparse(self, pidx, values, scale, power, out=None, gathered=None):
+        """:meth:`convolve_qpower` of a field that is zero except at the points ``pidx``.
+
+        ``pidx`` are sorted flat indices into the padded real slab (shape
+        ``(nx_local, 2 (ny // 2 + 1))``) and ``values`` the field there.  The
+        result goes to the padded real buffer, or to ``out`` (an array from
+        :meth:`aligned_padded`), or, with ``gathered``, only its values at
+        ``pidx`` are written there.  No slab-sized pass is spent on assembling
+        the input or on writing a gathered output (see
+        :meth:`petgap._fftw_mpi.ConvolutionPlans.apply_sparse`).
+        """
+        self._convolution.apply_sparse(pidx, values, self.qx, self.qy, scale, power, out,
+                                       gathered)
+
+    def aligned_padded(self):
+        """A zeroed array shaped and aligned like the padded real FFT buffer.
+
+        For fields a solver keeps in the padded layout so that transforms can
+        write them directly (``out`` of :meth:`convolve_qpower_sparse`).
+        """
+        padded = self._padded
+        array = _aligned_empty(padded.size, np.float64).reshape(padded.shape)
+        array[...] = 0.0
+        return array
+
     def backward(self):
         """Inverse FFT of :attr:`fourier` into :attr:`real`, *without* the ``1/(nx ny)``.
 

@@ -35,13 +35,15 @@ transform is forced every 50 such steps and before any verdict, so round-off
 cannot accumulate into the answer.
 
 The contact set is stored as sorted index lists, with the pressure, the
-conjugate direction and the gap kept on it only (:mod:`petgap.contact_set`,
-kernels in ``petgap/_contact_set.pyx``): at a few percent contact an iteration
-then streams the slab through memory once (the gap pass) besides the
-transforms, instead of half a dozen times.  The displacement ``u = K^{-1} p``
-is the one full field kept between iterations; the gap ``g = u - h + d`` is
-recomputed where it is needed, and the preconditioned gap is read from the FFT
-buffer where the transform left it.
+conjugate direction, the gap and the preconditioned gap kept on it only
+(:mod:`petgap.contact_set`, kernels in ``petgap/_contact_set.pyx``), and the
+transforms take their input from those lists and, for ``P_S K P_S g``, give
+their output back on them (:meth:`petgap.elastic.ElasticHalfSpace.apply_sparse`):
+at a few percent contact an iteration then streams the slab through memory
+once (the gap pass, which only reads) besides the transforms, instead of half
+a dozen times.  The displacement ``u = K^{-1} p`` is the one full field kept
+between iterations, in the padded layout the transform writes it in; the gap
+``g = u - h + d`` is recomputed where it is needed.
 
 Cold start: from the solution on a grid 2 or 4 times coarser where the
 grid's shape allows (:mod:`petgap.coarse`; about half the time at 512^2 and
@@ -111,6 +113,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     timer = Timer()
     refresh_interval = 50  # bound the round-off drift of the u recurrence
     n = grid.npoints
+    n_local, ny = h.size, grid.ny
     load = isinstance(control, Load)
     if load:
         target = float(control.mean_pressure)
@@ -169,7 +172,10 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         # converging (seen at 1024^2 and 8192^2).
         contact = None
     overlap = np.empty(max(1024, n // (100 * comm.size)), dtype=INDEX)
-    u = np.empty(grid.local_shape)
+    # u = K^{-1} p, kept in the padded layout so that the transform writes it
+    # there directly; its first columns double as scratch for the closed-form
+    # first iteration's pressure.
+    u = grid.aligned_padded()
     half_space = problem.half_space
     scale, fresh = 1.0, True
     since_fresh = 0
@@ -181,7 +187,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         # Its first iteration in closed form (one transform instead of three,
         # and no set of every point); the uniform set itself only where that
         # iteration is also the last.
-        first_step = _uniform_first_iteration(problem, mask, padded_width, target, u,
+        scratch = u.reshape(-1)[:n_local].reshape(grid.local_shape)
+        first_step = _uniform_first_iteration(problem, mask, padded_width, target, scratch,
                                               tolerance, max_iterations, monitor)
         if first_step is None:
             contact = ContactSet.everywhere(mask, padded_width, target)
@@ -192,23 +199,19 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     for it in range(first, max_iterations + 1):
         idx, pidx, pS, tS, gS = contact.idx, contact.pidx, contact.p, contact.t, contact.g
         if fresh:
-            # u = K^{-1} p from scratch: one transform pair
+            # u = K^{-1} p from scratch: one transform pair, from S to u
             if scale != 1.0:
                 pS *= scale
                 scale = 1.0
-            _cs.fill(padded, pidx, pS, 1.0)
-            half_space.apply_in_buffer(inverse=True)
+            half_space.apply_sparse(pidx, pS, inverse=True, out=u)
             problem.operator_applications += 1
-            src, sidx = padded, pidx
             since_fresh = 0
         else:
-            src, sidx = u, idx
             since_fresh += 1
-        n_contact, sum_g = _sums(comm, len(idx), _cs.gather_gap(src, sidx, h, idx, offset, gS))
+        n_contact, sum_g = _sums(comm, len(idx), _cs.gather_gap(u, pidx, h, idx, offset, gS))
         shift = sum_g / n_contact if (load and n_contact > 0) else 0.0
         in_max, g_norm = _cs.shift_and_norms(gS, shift)
-        pen_max, n_over = _cs.gap_pass(src, h, mask, u, fresh, offset - shift, padded,
-                                       preconditioned, overlap)
+        pen_max, n_over = _cs.gap_pass(u, h, mask, offset - shift, overlap)
         if n_over > len(overlap):
             overlap = np.empty(2 * n_over, dtype=INDEX)
             _cs.collect_overlap(u, h, mask, offset - shift, overlap)
@@ -227,7 +230,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # contact point (e.g. warm-started from a one-pixel contact), where no
             # direction has zero mean over S and the step would break down: let the
             # points where the surfaces overlap into S; `scale` restores the load.
-            g = u - h + (offset - shift)
+            g = u[:, :ny] - h + (offset - shift)
             g.ravel()[idx] = 0.0
             points = np.flatnonzero(g < 0)
             extra = -g.ravel()[points] * (problem.pressure_scale / problem.gap_scale)
@@ -237,11 +240,12 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             delta, fresh = 0.0, True
             continue
         if preconditioned:
-            # z = P_S K P_S g (one pair; gap_pass left P_S g in the buffer),
-            # made zero-mean on S under load control
-            half_space.apply_in_buffer(inverse=False)
+            # z = P_S K P_S g (one pair, from S to S), made zero-mean on S
+            # under load control
+            zS = contact.z
+            half_space.apply_sparse(pidx, gS, inverse=False, gathered=zS)
             problem.operator_applications += 1
-            sum_z, gz, g_sq = _sums(comm, *_cs.gather_sums(padded, pidx, gS), g_norm)
+            sum_z, gz, g_sq = _sums(comm, *_cs.z_sums(zS, gS), g_norm)
             zshift = sum_z / n_contact if load else 0.0
             # Pressure per unit penetration given to entering points (below):
             # plain Polonsky-Keer steps along the gap, so its step length tau
@@ -251,15 +255,15 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # Rayleigh quotient (g, K g) / (g, g) of the stiffness on the gap.
             stiffness = gz / g_sq if g_sq > 0 else 0.0
             g_norm = gz
-            _cs.direction_from_buffer(padded, pidx, zshift, delta * g_norm / g_old, tS)
+            _cs.direction(zS, zshift, delta * g_norm / g_old, tS)
         else:
             g_norm = _sums(comm, g_norm)[0]
             stiffness = 1.0
             _cs.direction(gS, 0.0, delta * g_norm / g_old, tS)
         g_old = g_norm
-        # The image r = K^{-1} t of the direction: one transform pair
-        _cs.fill(padded, pidx, tS, 1.0)
-        half_space.apply_in_buffer(inverse=True)
+        # The image r = K^{-1} t of the direction: one transform pair, from S
+        # to the whole slab (the recurrence below needs r everywhere)
+        half_space.apply_sparse(pidx, tS, inverse=True)
         problem.operator_applications += 1
         sum_r, sum_gt, sum_rt, sum_t = _sums(comm, *_cs.step_sums(padded, pidx, gS, tS))
         if load:
@@ -277,11 +281,12 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         scale = target * n / sum_p if load else 1.0
         if clipped or len(added):
             del idx, pidx, pS, tS, gS  # views of buffers merge may replace
+            zS = None
             contact.merge(added, added_p)
         # Same contact set, no projection: u follows p linearly, no transform needed.
         fresh = n_overlap > 0 or n_clipped > 0 or since_fresh >= refresh_interval
         if not fresh:
-            _cs.recurrence(u, padded, tau, scale)
+            _cs.recurrence(u, padded, tau, scale, ny)
             contact.p[...] *= scale
             scale = 1.0
 
@@ -289,9 +294,10 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     # scalars derived from it) is its projection onto the contact state found:
     # exactly 0 in contact, >= 0 elsewhere, within the reported kkt_gap h0.
     # The pressure residual is zero by construction (p > 0 on S, 0 off it).
-    on, off = _cs.final_gap(u, h, mask, offset - shift)
+    g = np.empty(grid.local_shape)
+    on, off = _cs.final_gap(u, h, mask, offset - shift, g)
+    del u
     residuals = (0.0, comm.allreduce(float(np.max([on, off])), op=MPI.MAX) / problem.gap_scale)
-    g = u
     p = np.zeros(grid.local_shape)
     p.ravel()[contact.idx] = contact.p
     contact = mask.view(bool)  # 0 or 1: a valid boolean array, no copy

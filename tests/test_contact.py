@@ -796,14 +796,17 @@ def test_final_gap_projects_and_measures_like_numpy():
     from petgap import _contact_set as cs
 
     rng = np.random.default_rng(3)
-    u, h = rng.standard_normal((6, 9)), rng.standard_normal((6, 9))
+    u, h = rng.standard_normal((6, 12)), rng.standard_normal((6, 9))  # u padded
     mask = (rng.random((6, 9)) < 0.3).astype(np.uint8)
-    g = u - h + 0.2
-    on, off = cs.final_gap(u, h, mask, 0.2)
+    g = u[:, :9] - h + 0.2
+    out = np.empty((6, 9))
+    on, off = cs.final_gap(u, h, mask, 0.2, out)
     assert on == np.abs(g[mask == 1]).max() and off == max((-g[mask == 0]).max(), 0.0)
-    np.testing.assert_array_equal(u, np.where(mask == 1, 0.0, np.maximum(g, 0.0)))
+    np.testing.assert_array_equal(out, np.where(mask == 1, 0.0, np.maximum(g, 0.0)))
     u[2, 3] = np.nan
-    assert np.isnan(max(cs.final_gap(u, h, mask, 0.2), key=np.isnan))
+    assert np.isnan(max(cs.final_gap(u, h, mask, 0.2, out), key=np.isnan))
+    with pytest.raises(ValueError, match="same slab"):
+        cs.final_gap(u, h, mask, 0.2, np.empty((6, 8)))
 
 
 def test_contact_set_merge_and_overlap_collection():
@@ -848,20 +851,28 @@ def test_contact_set_merge_and_overlap_collection():
     np.testing.assert_array_equal(new_p, [lookup[k][0] for k in expected])
     np.testing.assert_array_equal(new_t, [lookup[k][1] for k in expected])
 
-    # Overlap points: off the set with u - h + offset < 0.
-    u = rng.standard_normal((m, n))
-    h = np.zeros((m, n))
-    pad = np.empty((m, width))
+    # Overlap points: off the set with u - h + offset < 0, u in the padded
+    # layout (its padding must not be read: NaN there).
+    u = np.full((m, width), np.nan)
+    u[:, :n] = rng.standard_normal((m, n))
+    h = rng.standard_normal((m, n)) * 0.1
+    g = u[:, :n] - h + 0.05
     small = np.empty(2, dtype=np.int32)
-    pen, count = cs.gap_pass(u, h, mask, np.empty((m, n)), False, 0.0, pad, True, small)
-    truth = np.flatnonzero((u < 0) & (mask == 0))
+    pen, count = cs.gap_pass(u, h, mask, 0.05, small)
+    truth = np.flatnonzero((g < 0) & (mask == 0))
     assert count == len(truth) > 2
-    assert pen == pytest.approx(-u[(u < 0) & (mask == 0)].min())
+    assert pen == pytest.approx(-g[(g < 0) & (mask == 0)].min())
     np.testing.assert_array_equal(small, truth[:2])
-    np.testing.assert_array_equal(pad[:, :n], np.where(mask > 0, u, 0.0))
     big = np.empty(count, dtype=np.int32)
-    assert cs.collect_overlap(u, h, mask, 0.0, big) == count
+    assert cs.collect_overlap(u, h, mask, 0.05, big) == count
     np.testing.assert_array_equal(big, truth)
+    # their entering pressures, read from the padded u at unpadded indices
+    out = np.empty(count)
+    total = cs.overlap_pressures(u, h, big, 0.05, 2.0, out)
+    np.testing.assert_allclose(out, -2.0 * g.ravel()[truth], rtol=1e-15)
+    assert total == pytest.approx(out.sum())
+    u[1, 2] = np.nan                                  # a NaN in the field is reported
+    assert np.isnan(cs.gap_pass(u, h, mask, 0.05, big)[0])
 
 
 def test_contact_set_keeps_one_copy_as_it_shrinks_and_grows():
