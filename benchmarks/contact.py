@@ -11,14 +11,18 @@ to .npy, and solved
   pairs) per iteration, seconds per iteration, the FFT-pair floor
   (``../shared/bench/fft_limit``) measured in the same run, and peak memory per
   grid point (peak RSS minus the RSS before the grid exists, summed over ranks).
-  "s / it" and "evaluation / floor" are taken on the iterations' time: the
-  wall time less the start ("start s", the coarse-grid solve of a cold
-  ``pcg-pressure`` solve, included in "total s").  "evaluation / floor" is
-  that time per operator application over the floor (the median over rounds
-  of each solve against the two floors measured around it); it splits into
-  "operator / floor", the time inside the elastic operator per application,
-  and "rest", the share of the iterations' time outside it (the contact-set
-  kernels, reductions, Python);
+  "evaluation / floor" is the cost of one operator application in the
+  iterations: the time from the first iteration's verdict to the last one's
+  (taken by a monitor), per operator application in that span, over the floor
+  (the median over rounds of each solve against the two floors measured
+  around it).  It splits into "operator / floor", the time inside the elastic
+  operator per application, and "rest", the share of the span outside it
+  (the contact-set kernels, reductions, Python).  "solve / floor" is the same
+  ratio on the whole solve less its start: it adds the set-up of the solve
+  (contact set, work arrays), the first transform, and the assembly of the
+  result (derived quantities, the elastic energy's transform, TAO's solution
+  vector).  "s / it" is on that time too, and "total s" includes the start
+  ("start s", the coarse-grid solve of a cold ``pcg-pressure`` solve);
 * by Tamaas 2.9 ``PolonskyKeerRey`` (pressure primal, same load, tolerance
   1e-8) in a throwaway venv of the default Python (created on first use), whose
   solution is then judged by petgap's KKT metric so both stop at the same
@@ -72,26 +76,33 @@ def worker(args):
     control = MeanGap(args.mean_gap) if args.mean_gap is not None else Load(args.load)
     # Time spent in the elastic operator itself (the transform pairs of the
     # pressure solver), to split an evaluation's cost into the pair and the rest.
-    operator_seconds = [0.0]
+    operator_seconds, applications = [0.0], [0]
 
     def timed(apply):
         def timed_apply(*a, **k):
             t = time.perf_counter()
             out = apply(*a, **k)
             operator_seconds[0] += time.perf_counter() - t
+            applications[0] += 1
             return out
         return timed_apply
     half_space.apply_in_buffer = timed(half_space.apply_in_buffer)
     half_space.apply_sparse = timed(half_space.apply_sparse)
     options = {"petgap_coarse_start": "0"} if args.no_coarse else None
+    marks = []  # (time, operator seconds, applications) at each iteration's verdict
+
+    def monitor(iteration, residual):
+        marks.append((time.perf_counter(), operator_seconds[0], applications[0]))
     solution = solve(problem, control, solver=args.solver, tolerance=args.tolerance,
-                     max_iterations=args.max_iterations, options=options)
+                     max_iterations=args.max_iterations, options=options, monitor=monitor)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     peak_total = comm.allreduce((peak - base) * 1024.0)
     if comm.rank == 0:
         out = {k: v for k, v in solution.scalars().items()}
         out["bytes_per_point"] = peak_total / grid.npoints
         out["operator_seconds"] = operator_seconds[0]
+        if len(marks) > 1 and marks[-1][2] > marks[0][2]:
+            out["loop"] = [b - a for a, b in zip(marks[0], marks[-1])]
         print("RESULT " + json.dumps(out), flush=True)
 
 
@@ -201,9 +212,9 @@ def main():
         return worker(args)
 
     print(f"| N | ranks | solver | iterations | FFT pairs / it | s / it | FFT floor s | "
-          f"evaluation / floor | operator / floor | rest | start s | total s | c | kkt | "
+          f"evaluation / floor | operator / floor | rest | solve / floor | start s | total s | c | kkt | "
           f"bytes / point | Tamaas its | Tamaas s | Tamaas kkt | time ratio |")
-    print("|" + "---|" * 19)
+    print("|" + "---|" * 20)
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.sizes:
             surface = Path(tmp) / f"h{n}.npy"
@@ -240,10 +251,16 @@ def main():
                 # per application, over the mean of the floors before and after
                 per_floor = [1.0 / max(r["operator_applications"], 1)
                              / (0.5 * (floors[k] + floors[k + 1])) for k, r in enumerate(runs)]
-                ratios = [iterating(r) * f for r, f in zip(runs, per_floor)]
-                operator_ratio = statistics.median(
-                    r["operator_seconds"] * f for r, f in zip(runs, per_floor))
-                rest = statistics.median(1.0 - r["operator_seconds"] / iterating(r) for r in runs)
+                solve_ratio = statistics.median(iterating(r) * f for r, f in zip(runs, per_floor))
+                # the same on the iterations' span: [seconds, operator seconds, applications]
+                loops = [(r["loop"], 0.5 * (floors[k] + floors[k + 1]))
+                         for k, r in enumerate(runs) if r.get("loop")]
+                if loops:
+                    ratio = statistics.median(L[0] / L[2] / f for L, f in loops)
+                    operator_ratio = statistics.median(L[1] / L[2] / f for L, f in loops)
+                    rest = statistics.median(1.0 - L[1] / L[0] for L, f in loops)
+                else:
+                    ratio, operator_ratio, rest = solve_ratio, 0.0, 0.0
                 runs.sort(key=lambda r: r["wall_time"])
                 res = runs[len(runs) // 2]
                 floor = statistics.median(floors)
@@ -253,7 +270,6 @@ def main():
                 its = max(res["iterations"], 1)
                 per_it = iterating(res) / its
                 pairs = res["operator_applications"] / its
-                ratio = statistics.median(ratios)
                 kkt = max(res["kkt_pressure"], res["kkt_gap"])
                 if args.work > 0:
                     print(f"<!-- N={n} ranks={ranks}: mean gap {res['mean_gap']:.6g}, mean pressure "
@@ -268,6 +284,7 @@ def main():
                       f"{per_it:.4f} | {floor:.4f} | {ratio:.2f} | "
                       + (f"{operator_ratio:.2f} | {100 * rest:.0f} % | " if operator_ratio > 0
                          else "- | - | ")  # solvers that do not use these operators
+                      + f"{solve_ratio:.2f} | "
                       + f"{res.get('start_time', 0.0):.2f} | {res['wall_time']:.2f} | "
                       f"{res['contact_fraction']:.4f} | {kkt:.1e} | {res['bytes_per_point']:.0f} | "
                       + " | ".join(t_cols) + " |", flush=True)

@@ -410,7 +410,10 @@ def final_gap(const double[:, ::1] src, const double[:, ::1] h, const unsigned c
               double offset, double[:, ::1] out):
     """``out <- g = src - h + offset`` projected onto the contact state found.
 
-    ``src`` may be padded (the displacement where the solver keeps it).
+    ``src`` may be padded (the displacement where the solver keeps it), and
+    ``out`` may be the first ``m * n`` values of ``src``'s own storage: each
+    value is read before the value written over it (rows are processed in
+    order, and row ``i`` moves to an offset ``i n <= i w``).
     Returns the gap KKT residuals taken before the projection, ``(max |g| on
     S, max(-g) off S)``; then ``g = 0`` on S and ``g = max(g, 0)`` elsewhere.
     One pass where NumPy took five.  A NaN makes the residual NaN.

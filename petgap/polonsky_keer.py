@@ -130,11 +130,9 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         raise TypeError(f"unknown control {control!r}")
 
     start = "warm" if initial_pressure is not None else ""
-    owned = False  # may initial_pressure be overwritten (it is ours, not the caller's)?
     if initial_pressure is None and coarse_start:
         initial_pressure, start = coarse.coarse_start(problem, control, tolerance,
                                                       max_iterations)
-        owned = initial_pressure is not None
     start_time = timer()
     if initial_pressure is None:
         start = "; ".join(filter(None, [
@@ -149,18 +147,19 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     if initial_pressure is not None or not load:
         if initial_pressure is not None:
             p = np.asarray(initial_pressure, dtype=float)
-            p = np.maximum(p, 0.0, out=p if owned else None)
         else:
             # Mean-gap control: pressure where the undeformed surfaces overlap.
-            p = np.maximum(h - offset, 0.0) * (problem.pressure_scale / problem.gap_scale)
-        if load:
-            mean = grid.mean(p)
-            if mean > 0:
-                p *= target / mean
-            else:
-                p[...] = target
+            p = (h - offset) * (problem.pressure_scale / problem.gap_scale)
+        # S = {p > 0}, with p there: the negative part is dropped on the way in
+        # (no pass of its own), and p is rescaled to the load on S alone.
         contact = ContactSet.from_pressure(mask, padded_width, p)
         del p
+        if load:
+            total = _sums(comm, contact.p.sum())[0]
+            if total > 0:
+                contact.p[...] *= target * n / total
+            else:
+                contact = ContactSet.everywhere(mask, padded_width, target)
     else:
         # Load control from a uniform pressure: every point starts in S, which
         # then shrinks to the points that carry the load.  Robust where starts
@@ -294,7 +293,10 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     # scalars derived from it) is its projection onto the contact state found:
     # exactly 0 in contact, >= 0 elsewhere, within the reported kkt_gap h0.
     # The pressure residual is zero by construction (p > 0 on S, 0 off it).
-    g = np.empty(grid.local_shape)
+    # The gap is written over u, compacted to the unpadded layout in place (no
+    # new slab to allocate and fault in): row i moves to where it starts at or
+    # before its old place, so nothing is overwritten before it is read.
+    g = u.reshape(-1)[:n_local].reshape(grid.local_shape)
     on, off = _cs.final_gap(u, h, mask, offset - shift, g)
     del u
     residuals = (0.0, comm.allreduce(float(np.max([on, off])), op=MPI.MAX) / problem.gap_scale)

@@ -807,6 +807,14 @@ def test_final_gap_projects_and_measures_like_numpy():
     assert np.isnan(max(cs.final_gap(u, h, mask, 0.2, out), key=np.isnan))
     with pytest.raises(ValueError, match="same slab"):
         cs.final_gap(u, h, mask, 0.2, np.empty((6, 8)))
+    # written over the padded field itself, compacted in place
+    u[2, 3] = 0.5
+    g = u[:, :9] - h + 0.2
+    expected = np.where(mask == 1, 0.0, np.maximum(g, 0.0))
+    in_place = u.reshape(-1)[:54].reshape(6, 9)
+    on, off = cs.final_gap(u, h, mask, 0.2, in_place)
+    assert on == np.abs(g[mask == 1]).max() and off == max((-g[mask == 0]).max(), 0.0)
+    np.testing.assert_array_equal(in_place, expected)
 
 
 def test_contact_set_merge_and_overlap_collection():
