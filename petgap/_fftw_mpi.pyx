@@ -405,7 +405,8 @@ cdef class ConvolutionPlans:
             its padding columns are left as they are.
         gathered : float64 array, ``len(pidx)``, optional
             Instead of a whole slab, only the result at the points ``pidx``
-            (the real buffer and ``out`` are then left untouched).
+            (``out`` is then left untouched).  Both FFT buffers are scratch
+            in every case: the transposes go through the real one.
 
         The input is assembled ``BLOCK_ROWS`` rows at a time in a buffer that
         stays in cache and transformed from there; a gathered output is taken
@@ -418,6 +419,7 @@ cdef class ConvolutionPlans:
         cdef double *target = self.real_data
         cdef double *g = NULL
         cdef bint ok = True
+        cdef bint gather = gathered is not None
         if values.shape[0] != ns or (gathered is not None and gathered.shape[0] != ns):
             raise ValueError("pidx, values and gathered must have the same length")
         if out is not None:
@@ -451,9 +453,9 @@ cdef class ConvolutionPlans:
             # it, valid input or not, so that a bad index list raises on its
             # rank instead of leaving the others waiting in a transpose.
             self._middle(&qx[0], &qy[0], scale, power)
-            if ok and g == NULL:
+            if ok and not gather:
                 fftw_execute_dft_c2r(self.rows_bwd, self.fourier_data, target)
-            elif ok:
+            elif ok and ns > 0:
                 k = 0
                 i0 = 0
                 while i0 < ln0:

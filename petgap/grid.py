@@ -194,8 +194,9 @@ class Grid:
         ``(nx_local, 2 (ny // 2 + 1))``) and ``values`` the field there.  The
         result goes to the padded real buffer, or to ``out`` (an array from
         :meth:`aligned_padded`), or, with ``gathered``, only its values at
-        ``pidx`` are written there.  No slab-sized pass is spent on assembling
-        the input or on writing a gathered output (see
+        ``pidx`` are written there (both FFT buffers serve as scratch).  No
+        slab-sized pass is spent on assembling the input or on writing a
+        gathered output (see
         :meth:`petgap._fftw_mpi.ConvolutionPlans.apply_sparse`).
         """
         self._convolution.apply_sparse(pidx, values, self.qx, self.qy, scale, power, out,

@@ -102,6 +102,10 @@ def test_sparse_application_equals_dense(comm, shape):
         grid.real[...] = np.nan
         half_space.apply_sparse(pidx, values, inverse=inverse)
         errors.append(np.abs(grid.real - dense).max() / scale)
+    # an empty set: a zero field, and nothing to gather
+    half_space.apply_sparse(pidx[:0], values[:0], inverse=True, gathered=np.empty(0))
+    half_space.apply_sparse(pidx[:0], values[:0], inverse=True)
+    errors.append(np.abs(grid.real).max())
     worst = comm.allreduce(float(np.nan_to_num(max(errors), nan=np.inf)), op=MPI.MAX)
     assert worst <= 1e-13
 
