@@ -248,13 +248,13 @@ def main():
                 # solve, whose own operator applications are not counted here).
                 def iterating(r):
                     return r["wall_time"] - r.get("start_time", 0.0)
-                # per application, over the mean of the floors before and after
-                per_floor = [1.0 / max(r["operator_applications"], 1)
-                             / (0.5 * (floors[k] + floors[k + 1])) for k, r in enumerate(runs)]
-                solve_ratio = statistics.median(iterating(r) * f for r, f in zip(runs, per_floor))
+                # each solve against the mean of the floors before and after it
+                around = [0.5 * (a + b) for a, b in zip(floors, floors[1:])]
+                solve_ratio = statistics.median(
+                    iterating(r) / max(r["operator_applications"], 1) / f
+                    for r, f in zip(runs, around))
                 # the same on the iterations' span: [seconds, operator seconds, applications]
-                loops = [(r["loop"], 0.5 * (floors[k] + floors[k + 1]))
-                         for k, r in enumerate(runs) if r.get("loop")]
+                loops = [(r["loop"], f) for r, f in zip(runs, around) if r.get("loop")]
                 if loops:
                     ratio = statistics.median(L[0] / L[2] / f for L, f in loops)
                     operator_ratio = statistics.median(L[1] / L[2] / f for L, f in loops)

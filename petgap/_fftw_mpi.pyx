@@ -204,6 +204,26 @@ cdef enum:
     BLOCK_ROWS = 8
 
 
+cdef inline void _block_sizes(Py_ssize_t rows, int sizes[2]) noexcept:
+    """Row counts of the two block plans for ``rows`` rows: a full block, and the remainder.
+
+    ``sizes[0] = min(BLOCK_ROWS, rows)``; ``sizes[1]`` is the last, partial
+    block's size, or 0 when there is none.
+    """
+    sizes[0] = <int>min(<Py_ssize_t>BLOCK_ROWS, rows)
+    sizes[1] = <int>(rows % BLOCK_ROWS) if rows > BLOCK_ROWS else 0
+
+
+cdef inline int _block(Py_ssize_t start, Py_ssize_t rows, Py_ssize_t full,
+                       Py_ssize_t *m) noexcept nogil:
+    """The block of rows from ``start``: its size in ``m``, and which plan takes it.
+
+    Plan 0 takes ``full = min(BLOCK_ROWS, rows)`` rows, plan 1 the remainder.
+    """
+    m[0] = min(<Py_ssize_t>BLOCK_ROWS, rows - start)
+    return 0 if m[0] == full else 1
+
+
 cdef class ConvolutionPlans:
     """``x <- F^{-1} [scale |q|^power F x]`` in the padded real slab, in one sweep.
 
@@ -245,7 +265,7 @@ cdef class ConvolutionPlans:
     cdef double *real_data
     cdef fftw_complex *fourier_data
     cdef Py_ssize_t n0, ln0, ln1, nky
-    cdef Py_ssize_t block_rows, block_lines   # rows of the plans [0]: min(BLOCK_ROWS, local)
+    cdef int block_rows[2], block_lines[2]   # rows of the plans [0] and [1] (_block_sizes)
     cdef object comm, real, fourier
 
     def __cinit__(self):
@@ -266,22 +286,18 @@ cdef class ConvolutionPlans:
         self.comm, self.real, self.fourier = comm, real, fourier
         self.n0, self.ln0, self.ln1 = n0, local_n0, local_n1
         self.nky = n1 // 2 + 1
-        self.block_rows = min(BLOCK_ROWS, local_n0)
-        self.block_lines = min(BLOCK_ROWS, local_n1)
+        _block_sizes(local_n0, self.block_rows)
+        _block_sizes(local_n1, self.block_lines)
         cdef unsigned flags = PLANNER_FLAGS[planner]
         cdef int n = <int>n1
         cdef int nky = <int>(n1 // 2 + 1)
         cdef int howmany = <int>local_n0
         cdef int line_length = <int>n0
-        cdef int rows[2]
-        rows[0] = <int>min(BLOCK_ROWS, local_n0)
-        rows[1] = <int>(local_n0 % BLOCK_ROWS) if local_n0 > BLOCK_ROWS else 0
+        cdef int *rows = self.block_rows
         cdef MPI_Comm mcomm = comm.ob_mpi
         self.real_data = <double *>cnp.PyArray_DATA(real)
         self.fourier_data = <fftw_complex *>cnp.PyArray_DATA(fourier)
-        cdef int lines[2]
-        lines[0] = <int>min(BLOCK_ROWS, local_n1)
-        lines[1] = <int>(local_n1 % BLOCK_ROWS) if local_n1 > BLOCK_ROWS else 0
+        cdef int *lines = self.block_lines
         cdef fftw_complex *transposed = <fftw_complex *>self.real_data
         self.block = <double *>fftw_malloc(BLOCK_ROWS * 2 * nky * sizeof(double))
         if self.block == NULL:
@@ -351,8 +367,7 @@ cdef class ConvolutionPlans:
         fftw_execute(self.transpose_fwd)
         j0 = 0
         while j0 < self.ln1:
-            m = min(<Py_ssize_t>BLOCK_ROWS, self.ln1 - j0)
-            which = 0 if m == self.block_lines else 1
+            which = _block(j0, self.ln1, self.block_lines[0], &m)
             rows = (<fftw_complex *>self.real_data) + j0 * n0
             fftw_execute_dft(self.lines_fwd[which], rows, rows)
             for j in range(j0, j0 + m):
@@ -416,11 +431,12 @@ cdef class ConvolutionPlans:
         self._check_multiplier(qx, qy, power)
         cdef Py_ssize_t ns = pidx.shape[0], pw = 2 * self.nky, ln0 = self.ln0
         cdef Py_ssize_t i0, k, m, base, end
+        cdef int which
         cdef double *target = self.real_data
         cdef double *g = NULL
         cdef bint ok = True
         cdef bint gather = gathered is not None
-        if values.shape[0] != ns or (gathered is not None and gathered.shape[0] != ns):
+        if values.shape[0] != ns or (gather and gathered.shape[0] != ns):
             raise ValueError("pidx, values and gathered must have the same length")
         if out is not None:
             if out.shape[0] != ln0 or out.shape[1] != pw:
@@ -429,13 +445,13 @@ cdef class ConvolutionPlans:
             target = &out[0, 0]
             if fftw_alignment_of(target) != fftw_alignment_of(self.real_data):
                 raise ValueError("out is not aligned like the real FFT buffer")
-        if gathered is not None and ns > 0:
+        if gather and ns > 0:
             g = &gathered[0]
         with nogil:
             k = 0
             i0 = 0
             while i0 < ln0:
-                m = min(<Py_ssize_t>BLOCK_ROWS, ln0 - i0)
+                which = _block(i0, ln0, self.block_rows[0], &m)
                 base = i0 * pw
                 end = base + m * pw
                 memset(self.block, 0, m * pw * sizeof(double))
@@ -445,7 +461,7 @@ cdef class ConvolutionPlans:
                         break
                     self.block[pidx[k] - base] = values[k]
                     k += 1
-                fftw_execute_dft_r2c(self.block_fwd[0 if m == self.block_rows else 1], self.block,
+                fftw_execute_dft_r2c(self.block_fwd[which], self.block,
                                      self.fourier_data + i0 * self.nky)
                 i0 += BLOCK_ROWS
             ok = ok and k == ns
@@ -459,10 +475,10 @@ cdef class ConvolutionPlans:
                 k = 0
                 i0 = 0
                 while i0 < ln0:
-                    m = min(<Py_ssize_t>BLOCK_ROWS, ln0 - i0)
+                    which = _block(i0, ln0, self.block_rows[0], &m)
                     base = i0 * pw
                     end = base + m * pw
-                    fftw_execute_dft_c2r(self.block_bwd[0 if m == self.block_rows else 1],
+                    fftw_execute_dft_c2r(self.block_bwd[which],
                                          self.fourier_data + i0 * self.nky, self.block)
                     while k < ns and pidx[k] < end:
                         g[k] = self.block[pidx[k] - base]
