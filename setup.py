@@ -37,8 +37,8 @@ if not os.environ.get("PETGAP_PORTABLE_BUILD"):
 link_flags = mpicc_flags("link")
 
 extension = Extension(
-    "petgap._fftw_mpi",
-    sources=["petgap/_fftw_mpi.pyx"],
+    "petgap.parallel._fftw_mpi",
+    sources=["petgap/parallel/_fftw_mpi.pyx"],
     include_dirs=[numpy.get_include(), mpi4py.get_include()]
     + [f[2:] for f in compile_flags if f.startswith("-I")],
     library_dirs=[f[2:] for f in link_flags if f.startswith("-L")],
@@ -48,16 +48,16 @@ extension = Extension(
 )
 
 kernels = Extension(
-    "petgap._kernels",
-    sources=["petgap/_kernels.pyx"],
+    "petgap.solvers._kernels",
+    sources=["petgap/solvers/_kernels.pyx"],
     extra_compile_args=optimise,
     define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
 )
 
-# Kernels on the contact set stored as index lists (petgap.polonsky_keer).
+# Kernels on the contact set stored as index lists (petgap.solvers.pressure_cg).
 contact_set = Extension(
-    "petgap._contact_set",
-    sources=["petgap/_contact_set.pyx"],
+    "petgap.solvers._contact_set",
+    sources=["petgap/solvers/_contact_set.pyx"],
     extra_compile_args=optimise,
     define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
 )
@@ -66,11 +66,11 @@ setup(
     name="petgap",
     version="0.1.0",
     description="Gap distributions and adhesion of rough elastic contacts (PETSc/TAO, FFTW-MPI)",
-    packages=find_packages(include=["petgap", "petgap.*", "postprocess", "postprocess.*"]),
+    packages=find_packages(include=["petgap", "petgap.*"]),
     ext_modules=cythonize([extension, kernels, contact_set], language_level=3,
                           compiler_directives={"boundscheck": False, "wraparound": False,
                                                "cdivision": True, "initializedcheck": False}),
     python_requires=">=3.11",
-    entry_points={"console_scripts": ["petgap = petgap.cli:main",
-                                      "petgap-post = postprocess.cli:main"]},
+    entry_points={"console_scripts": ["petgap = petgap.app.run:main",
+                                      "petgap-post = petgap.app.post:main"]},
 )

@@ -55,13 +55,13 @@ def worker(args):
     import numpy as np
     from mpi4py import MPI
 
-    from petgap.contact import ContactProblem, Load, MeanGap
-    from petgap.elastic import ElasticHalfSpace
-    from petgap.grid import Grid
-    from petgap.interaction import ExponentialAdhesion
-    from petgap.solver import solve
-    from petgap.surface import self_affine
-    from petgap.topography import save_topography_npy
+    from petgap.mechanics.problem import ContactProblem, Load, MeanGap
+    from petgap.mechanics.half_space import ElasticHalfSpace
+    from petgap.parallel.grid import Grid
+    from petgap.mechanics.interactions import ExponentialAdhesion
+    from petgap.solvers.dispatch import solve
+    from petgap.surfaces.self_affine import self_affine
+    from petgap.surfaces.topography import save_topography_npy
 
     comm = MPI.COMM_WORLD
     n = args.n

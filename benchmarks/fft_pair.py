@@ -45,8 +45,8 @@ def worker(n, repeats, warmup):
     import numpy as np
     from mpi4py import MPI
 
-    from petgap.elastic import ElasticHalfSpace
-    from petgap.grid import Grid
+    from petgap.mechanics.half_space import ElasticHalfSpace
+    from petgap.parallel.grid import Grid
     comm = MPI.COMM_WORLD
     grid = Grid((n, n), comm=comm, planner="measure")
     # Data as fft_limit.c's: uniform random numbers (after planning, which

@@ -1,7 +1,7 @@
 """Peak memory per grid point of generating a self-affine surface.
 
 Measures, on every rank, the peak resident set size (``getrusage`` maxrss) after
-creating the :class:`~petgap.grid.Grid` and after :func:`petgap.surface.self_affine`,
+creating the :class:`~petgap.parallel.grid.Grid` and after :func:`petgap.surfaces.self_affine.self_affine`,
 each minus the peak right after the imports (interpreter, NumPy, MPI, FFTW).
 Bytes per point are over the points a rank owns, ``N^2 / P``; the ideal is the
 grid's two FFT buffers (a padded real slab and the half-plane Fourier slab,
@@ -21,8 +21,8 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from petgap.grid import Grid
-from petgap.surface import self_affine
+from petgap.parallel.grid import Grid
+from petgap.surfaces.self_affine import self_affine
 
 
 def peak_bytes():

@@ -1,0 +1,54 @@
+"""From solved fields to the paper's quantities: contact area, perimeter, gaps, adhesion.
+
+Every function works on a :class:`~petgap.parallel.grid.Grid`'s row slabs, ``(nx_local, ny)``,
+and returns global results that are the same on every rank (all functions are
+collective).  Nothing is ever gathered on one rank: what crosses a slab boundary
+(neighbouring pixels of the perimeter) is fetched as a few halo rows, and
+histograms and sums are reduced.
+
+Equation numbers are those of the paper the project implements, "Distribution of gaps
+and adhesive interaction between contacting rough surfaces" (``shared/paper/
+gap-distribution.md``; Monti, Sanner & Pastewka, Tribology Letters, 2021).
+
+Conventions (GUIDE section 4)
+-----------------------------
+* Gap ``g >= 0`` (length), pressure ``p`` positive in compression, pixel area
+  ``dx dy``, nominal area ``A0 = Lx Ly``, ``N = nx ny`` pixels, periodic in x and y.
+* Repulsive contact: zero gap, ``g <= gap_tolerance``, **and** ``p > 0``.  A pixel
+  at zero gap under tension (adhesive solutions) is *not* in repulsive contact.
+  ``A_rep = dx dy * (number of contact pixels)``, ``c = A_rep / A0``.  The default
+  tolerance is ``GAP_ROUND_OFF = 1e-6`` times the mean gap (:func:`resolve_gap_tolerance`):
+  a solver that computes the gap as ``d + u - h`` leaves round-off gaps of order its
+  tolerance (``~1e-9`` of ``h0``) on contact pixels -- on a 512^2 rough contact solved
+  to 1e-8 by Polonsky-Keer, 37 % of the contact pixels -- while physical gaps next to a
+  contact edge are many orders larger (``g ~ g0 (s / d_rep)^(3/2)``).
+* Perimeter ``P_rep``: length of the marching-squares contour of the contact set
+  with crossings placed by the universal square-root / three-halves asymptotics
+  of a smooth contact edge (:func:`perimeter`).  ``d_rep = pi A_rep / P_rep``
+  (Eq. 2), ``g0 = 4 h0' d_rep / 3`` (Eq. 12).
+* Gap distribution: densities are per unit gap and normalised over the
+  *non-contacting* pixels (their integral is 1 when no pixel sits at zero gap
+  outside repulsive contact); the full distribution of the paper's Eq. 9 for
+  ``g > 0`` is ``(1 - c)`` times it.
+* Interaction stress ``v'(g) > 0`` is tensile (``v = -w exp(-g / rho)``, Eq. 6);
+  attractive forces are negative: ``F_att = -sum_x dx dy v'(g(x)) < 0``, and
+  ``1 / kappa_att = -F_att / (h0' E* A_rep) > 0`` (the paper's Fig. 3 convention).
+"""
+
+from petgap.analysis.contact_geometry import (  # noqa: F401  (the package's API)
+    contact_mask, resolve_gap_tolerance, GAP_ROUND_OFF, perimeter, crossing_fraction, contact_statistics, PerimeterResult, ContactStatistics)
+from petgap.analysis.gap_distribution import (  # noqa: F401  (the package's API)
+    gap_distribution, collapse, fit_power_law, resolved_gap, auto_fit_range, FitRange, near_contact_area, near_contact_area_eq14, GapDistribution, PowerLawFit, NearContactArea,
+    BINS_PER_DECADE, DEFAULT_RANGE, FIT_RESOLUTION_FACTOR, FIT_X_MAX, FIT_SLOPE_BAND,
+    FIT_SLOPE_WINDOW, FIT_MIN_DECADES, FIT_MIN_COUNT, FIT_SIGMAS)
+from petgap.analysis.adhesion import (  # noqa: F401  (the package's API)
+    attractive_force_measured, attractive_force_eq16, inverse_kappa_att, fig4_integrand, AttractiveForce, Eq16Force, GAMMA_2_3)
+
+__all__ = ["contact_mask", "resolve_gap_tolerance", "GAP_ROUND_OFF", "perimeter",
+           "crossing_fraction", "contact_statistics",
+           "gap_distribution", "collapse", "fit_power_law", "resolved_gap", "auto_fit_range",
+           "FitRange", "near_contact_area",
+           "near_contact_area_eq14", "attractive_force_measured", "attractive_force_eq16",
+           "inverse_kappa_att", "fig4_integrand", "PerimeterResult", "ContactStatistics",
+           "GapDistribution", "PowerLawFit", "NearContactArea", "AttractiveForce",
+           "Eq16Force", "GAMMA_2_3"]

@@ -1,0 +1,64 @@
+"""What a scene asks to be solved, step by step, and how the steps chain.
+
+A run is a list of steps, each one solve written as one group of the result
+file.  Steps form *chains*: each step is warm-started from the previous step of
+its chain.
+
+* A plain sweep (``control.kind`` = ``load`` or ``mean-gap``) is one chain, one
+  step per value, with the scene's interaction.
+* The paper's protocol (``control.reference = "non-adhesive"``, section 4 and
+  Fig. 3): one chain of non-adhesive steps at the given loads, then one chain
+  of adhesive steps, each at the mean gap that the matching non-adhesive step
+  found.  Both chains are stored, so the adhesive gap distributions can be
+  normalised by the non-adhesive ``g0`` and ``c``, as in Fig. 3.
+"""
+from dataclasses import dataclass
+from typing import Optional
+
+from petgap.mechanics.problem import Load, MeanGap
+
+
+@dataclass(frozen=True)
+class Step:
+    """One planned solve.
+
+    Attributes
+    ----------
+    index : int
+        Position in the run and in the result file (``step_0000``...).
+    chain : str
+        ``"sweep"``, ``"reference"`` (non-adhesive reference) or ``"adhesive"``.
+    adhesive : bool
+        Whether the scene's adhesive interaction applies (else the hard wall).
+    control : Load, MeanGap or None
+        ``None`` when the value comes from ``reference_step``'s mean gap.
+    reference_step : int or None
+        Index of the step whose mean gap this step imposes.
+    """
+
+    index: int
+    chain: str
+    adhesive: bool
+    control: Optional[object]
+    reference_step: Optional[int] = None
+
+    def attrs(self):
+        """Attributes describing the plan of this step (for its HDF5 group)."""
+        return {"chain": self.chain, "adhesive": self.adhesive,
+                "reference_step": -1 if self.reference_step is None else self.reference_step}
+
+
+def plan(scene):
+    """The steps of a scene, in the order they run (empty for ``control.kind = "none"``)."""
+    control = scene.control
+    if control.kind == "none":
+        return []
+    adhesive = scene.interaction.kind == "exponential"
+    make = Load if control.kind == "load" else MeanGap
+    values = list(control.values)
+    if control.reference == "non-adhesive":
+        steps = [Step(i, "reference", False, Load(v)) for i, v in enumerate(values)]
+        k = len(values)
+        steps += [Step(k + i, "adhesive", True, None, reference_step=i) for i in range(k)]
+        return steps
+    return [Step(i, "sweep", adhesive, make(v)) for i, v in enumerate(values)]

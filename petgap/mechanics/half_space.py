@@ -1,0 +1,137 @@
+"""Linear elastic response of a periodic half-space to normal surface tractions.
+
+Conventions (see also :mod:`petgap.parallel.grid`)
+-----------------------------------------
+* ``u`` is the normal surface displacement, positive away from the rigid
+  counter-surface; ``p`` is the normal pressure, positive in compression.
+* In Fourier space (forward DFT unnormalised, ``f_q = sum_x f(x) exp(-i q.x)``)
+  the half-space is diagonal (Johnson 1985, ch. 12; Stanley & Kato 1997)::
+
+      u_q = 2 p_q / (E* |q|),    p_q = E* |q| u_q / 2,    q != 0,
+
+  with ``E*`` the contact modulus of the paper's Eq. 4.
+* The ``q = 0`` mode is the rigid-body position of the half-space and the mean
+  pressure; an infinite half-space has no finite stiffness for it, so these
+  operators never produce it: :meth:`pressure` returns the zero-mean pressure of
+  a displacement and :meth:`displacement` the zero-mean displacement of a
+  pressure.  The mean is set by the control (load or mean gap), not here.
+* Elastic energy ``E_el = (1/2) sum_x dx dy p(x) u(x)``, evaluated exactly in
+  Fourier space by Parseval: ``(dx dy / 2 N) sum_q (E* |q| / 2) |u_q|^2``.
+
+Every operation costs one forward and one inverse transform (the energy only a
+forward one) and one fused pass over the Fourier slab; inputs are never modified
+and the grid's FFT buffers are used as scratch.
+"""
+import numpy as np
+
+from petgap.parallel._fftw_mpi import weighted_power
+
+
+class ElasticHalfSpace:
+    """The periodic elastic half-space on a :class:`~petgap.parallel.grid.Grid`.
+
+    Parameters
+    ----------
+    grid : petgap.parallel.grid.Grid
+        Decomposition and transforms.
+    contact_modulus : float
+        ``E*`` (paper Eq. 4), positive.
+    """
+
+    def __init__(self, grid, contact_modulus=1.0):
+        contact_modulus = float(contact_modulus)
+        if not (np.isfinite(contact_modulus) and contact_modulus > 0):
+            raise ValueError(f"contact_modulus must be positive and finite, got {contact_modulus}")
+        self.grid = grid
+        self.contact_modulus = contact_modulus
+        n = grid.npoints
+        # Factors folding in the 1/N of the inverse transform.
+        self._stiffness = contact_modulus / (2.0 * n)
+        self._compliance = 2.0 / (contact_modulus * n)
+        self._point_stiffness = None  # computed on first use (collective)
+
+    def _apply(self, field, scale, power, out):
+        grid = self.grid
+        np.copyto(grid.real, field)
+        grid.convolve_qpower(scale, power)
+        if out is None:
+            return grid.real.copy()
+        np.copyto(out, grid.real)
+        return out
+
+    def apply_in_buffer(self, inverse=False):
+        """Apply ``K`` (or ``K^{-1}``) to the field already in ``grid.real``, in place.
+
+        For solvers that fill the FFT buffer in a fused pass of their own and
+        read the result straight from it: no copies in or out.
+        """
+        if inverse:
+            return self.grid.convolve_qpower(self._compliance, -1)
+        return self.grid.convolve_qpower(self._stiffness, 1)
+
+    def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None):
+        """Apply ``K`` (or ``K^{-1}``) to a field given on a set of points only.
+
+        The field is ``values`` at the sorted padded-slab indices ``pidx`` and
+        zero elsewhere (a pressure on a contact set, a gap restricted to one);
+        the result goes to the FFT buffer ``grid.real``, to ``out`` (from
+        :meth:`petgap.parallel.grid.Grid.aligned_padded`), or only its values at
+        ``pidx`` to ``gathered``.  Same operator as :meth:`apply_in_buffer`
+        without its slab-sized fill and, gathered, its slab-sized output.
+        """
+        if inverse:
+            self.grid.convolve_qpower_sparse(pidx, values, self._compliance, -1, out, gathered)
+        else:
+            self.grid.convolve_qpower_sparse(pidx, values, self._stiffness, 1, out, gathered)
+
+    def pressure(self, displacement, out=None):
+        """Zero-mean pressure ``p = K u`` that holds the displacement ``u``.
+
+        Parameters
+        ----------
+        displacement : ndarray, shape ``grid.local_shape``
+        out : ndarray, optional
+            Where to write the result (may be ``displacement`` itself).
+        """
+        return self._apply(displacement, self._stiffness, 1, out)
+
+    def displacement(self, pressure, out=None):
+        """Zero-mean displacement ``u = K^{-1} p`` under the pressure ``p``.
+
+        The mean of ``pressure`` (the q = 0 mode) is ignored: it moves the
+        half-space rigidly by an amount the control decides.
+        """
+        return self._apply(pressure, self._compliance, -1, out)
+
+    def point_stiffness(self):
+        """The diagonal of ``K``: the pressure at a point per unit displacement of it alone.
+
+        ``(1 / N) sum_q E* |q| / 2`` (the ``q = 0`` term is zero), about
+        ``1.2 E* / a0`` on a square grid.  Solvers that work in pressure but
+        meet a penetration ``g`` (a length) use ``k g`` as the pressure scale
+        of that point, so that their steps do not depend on the unit system.
+        Collective: every rank must call it; computed once and cached.
+        """
+        if self._point_stiffness is None:
+            grid = self.grid
+            local = sum(float(w) * float(np.hypot(grid.qx, qy).sum())
+                        for w, qy in zip(grid.hermitian_weight, grid.qy))
+            total = grid.comm.allreduce(local)
+            self._point_stiffness = self._stiffness * total
+        return self._point_stiffness
+
+    def energy(self, displacement):
+        """Elastic energy ``(1/2) sum_x dx dy p(x) u(x)`` of a displacement (all ranks)."""
+        grid = self.grid
+        grid.forward(displacement)
+        local = weighted_power(grid.fourier, grid.qx, grid.qy, grid.hermitian_weight, 1)
+        total = grid.comm.allreduce(local)
+        return 0.5 * grid.pixel_area * self._stiffness * total
+
+    def complementary_energy(self, pressure):
+        """``(1/2) sum_x dx dy p(x) u(x)`` with ``u = K^{-1} p`` (mean of ``p`` ignored)."""
+        grid = self.grid
+        grid.forward(pressure)
+        local = weighted_power(grid.fourier, grid.qx, grid.qy, grid.hermitian_weight, -1)
+        total = grid.comm.allreduce(local)
+        return 0.5 * grid.pixel_area * self._compliance * total

@@ -1,0 +1,341 @@
+"""The contact problem: a rigid rough surface against a periodic elastic half-space.
+
+Formulation (GUIDE section 4)
+-----------------------------
+The gap is ``g(x) = d + u(x) - h(x) >= 0`` with ``h`` the rigid topography,
+``u`` the elastic displacement (positive away from the rigid surface) and ``d``
+the rigid-body separation.  Since the half-space operator only sees the
+fluctuation of ``u``, the elastic pressure is a function of the gap alone::
+
+    p_el = K (g + h),        zero mean, K = E* |q| / 2 in Fourier space.
+
+The total pressure is ``p = P0 + p_el`` (positive in compression), ``P0`` the
+mean pressure.  Energies are per cell (``dx dy`` weights).
+
+* Load control: minimise ``E_el(g) + E_int(g) + P0 A0 mean(g)`` over ``g >= 0``.
+  Its gradient, divided by the pixel area, is ``p_el + P0 + v'(g) = p + v'(g)``.
+* Mean-gap control: minimise ``E_el + E_int`` over ``g >= 0`` with
+  ``mean(g) = g_bar``; ``P0`` is the Lagrange multiplier.
+
+KKT conditions: ``p + v'(g) = 0`` where ``g > 0`` and ``p + v'(0) >= 0`` where
+``g = 0`` (repulsive contact).  A solution is judged by two unit-free residuals
+(:meth:`ContactProblem.kkt_residuals`): the largest violation in pressure
+relative to ``h0' E*`` and the largest violation in gap relative to ``h0``.
+"""
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from mpi4py import MPI
+
+from petgap.parallel._fftw_mpi import weighted_power
+from petgap.mechanics.interactions import HardWall
+
+
+@dataclass(frozen=True)
+class Load:
+    """Load control: prescribed mean pressure ``P0`` (positive in compression)."""
+
+    mean_pressure: float
+    kind = "load"
+
+    @property
+    def value(self):
+        return self.mean_pressure
+
+
+@dataclass(frozen=True)
+class MeanGap:
+    """Mean-gap control: prescribed ``mean(g)`` (the mean pressure follows)."""
+
+    mean_gap: float
+    kind = "mean-gap"
+
+    @property
+    def value(self):
+        return self.mean_gap
+
+
+@dataclass
+class ContactSolution:
+    """A solved (or not) contact state and how it was reached.
+
+    Fields are this rank's slabs; scalars are global.  Contact (``A_rep``) is
+    repulsive contact: zero gap and compressive pressure.  ``zero_gap_fraction``
+    is the area fraction at the wall (``g <= 0``, i.e. ``g = 0`` in a stored
+    state), whether the wall pushes there (the ``contact_fraction``) or adhesion
+    holds the surfaces together under tension (``p < 0``): for the hard wall the
+    two differ only by points that touch without load, but a JKR-like contact
+    has tensile edges, and near pull-off under mean-gap control it may be all
+    tension (``contact_fraction = 0``) while still stuck; it is this area that
+    vanishes at pull-off, and that :func:`petgap.solvers.dispatch.annotate_step` watches
+    for jumps.  Forces are per cell:
+    ``repulsive_force`` is the hard-wall reaction ``sum dx dy (p + v'(0))`` over
+    the points at the wall, ``attractive_force = -sum dx dy v'(g)`` over all
+    points (the paper's Eq. 15, negative when attractive); their sum is
+    ``A0 mean_pressure``.  ``attractive_fraction`` is the area fraction of the
+    points outside repulsive contact within one interaction range
+    (``g <= rho``) -- the bands of width ``d_att`` of the paper's Fig. 1.
+    ``kappa_rep = A_rep h0' E* / F_rep`` and ``inv_kappa_att = -F_att /
+    (h0' E* A_rep)``, positive for attraction as in the paper's Fig. 3 (the
+    paper's Eq. 16 text writes the ratio without the minus sign).  ``converged`` is False
+    whenever the tolerance was not met (for instance at the iteration limit);
+    ``reason`` then says why the solver stopped.
+    """
+
+    gap: np.ndarray
+    pressure: np.ndarray
+    control: object
+    mean_gap: float
+    mean_pressure: float
+    contact_fraction: float
+    zero_gap_fraction: float
+    elastic_energy: float
+    interaction_energy: float
+    kappa_rep: float
+    repulsive_force: float
+    attractive_force: float
+    attractive_fraction: float
+    inv_kappa_att: float
+    kkt_pressure: float
+    kkt_gap: float
+    converged: bool
+    reason: str
+    solver: str
+    iterations: int
+    operator_applications: int
+    wall_time: float
+    history: list = field(default_factory=list, repr=False)
+    direction: str = "start"
+    jump: bool = False
+    negative_curvature_steps: int = 0
+    start: str = ""
+    start_time: float = 0.0
+
+    def scalars(self):
+        """The scalar results as a flat dict (for HDF5 attributes and tables)."""
+        out = {k: getattr(self, k) for k in (
+            "mean_gap", "mean_pressure", "contact_fraction", "zero_gap_fraction",
+            "elastic_energy", "interaction_energy", "kappa_rep", "repulsive_force",
+            "attractive_force", "attractive_fraction", "inv_kappa_att", "kkt_pressure",
+            "kkt_gap", "converged", "reason", "solver", "iterations", "operator_applications",
+            "wall_time", "direction", "jump", "negative_curvature_steps", "start",
+            "start_time")}
+        out["control"] = self.control.kind
+        out["control_value"] = self.control.value
+        return out
+
+
+class ContactProblem:
+    """Everything a solver needs to know about one contact configuration.
+
+    Parameters
+    ----------
+    grid : petgap.parallel.grid.Grid
+    topography : ndarray, shape ``grid.local_shape``
+        This rank's slab of the rigid surface heights ``h``.
+    half_space : petgap.mechanics.half_space.ElasticHalfSpace
+    interaction : HardWall or ExponentialAdhesion, optional
+        Default: hard wall only.
+    """
+
+    def __init__(self, grid, topography, half_space, interaction=None):
+        if topography.shape != grid.local_shape:
+            raise ValueError(f"topography slab has shape {topography.shape}, "
+                             f"grid expects {grid.local_shape}")
+        self.grid = grid
+        self.half_space = half_space
+        self.interaction = interaction or HardWall()
+        self.topography = np.ascontiguousarray(topography, dtype=float)
+        self.mean_height = grid.mean(self.topography)
+        # Spectral statistics set the unit-free residual scales.
+        grid.forward(self.topography)
+        comm = grid.comm
+        power0 = comm.allreduce(weighted_power(grid.fourier, grid.qx, grid.qy,
+                                               grid.hermitian_weight, 0))
+        power2 = comm.allreduce(weighted_power(grid.fourier, grid.qx, grid.qy,
+                                               grid.hermitian_weight, 2))
+        n = grid.npoints
+        self.rms_height = float(np.sqrt(max(power0 / n ** 2 - self.mean_height ** 2, 0.0)))
+        self.rms_slope = float(np.sqrt(power2) / n)
+        if not (self.rms_height > 0 and self.rms_slope > 0):
+            raise ValueError("the topography is flat: contact of a flat surface has no "
+                             "rough-contact solution (rms height and slope are zero)")
+        #: Pressure scale of the KKT residual, ``h0' E*``.
+        self.pressure_scale = self.rms_slope * half_space.contact_modulus
+        #: Gap scale of the KKT residual, ``h0``.
+        self.gap_scale = self.rms_height
+        self.operator_applications = 0
+        #: The block-averaged problem of :func:`petgap.solvers.coarse.coarse_problem`,
+        #: made on first use and kept for the steps of a sweep (False: not yet
+        #: looked for; None: this grid is not coarsened).
+        self._coarse = False
+
+    # ------------------------------------------------------------ operators
+    def elastic_pressure(self, gap, out=None):
+        """Zero-mean elastic pressure ``K (g + h)`` (one transform pair)."""
+        self.operator_applications += 1
+        buf = self.grid.real
+        np.add(gap, self.topography, out=buf)
+        return self.half_space._apply(buf, self.half_space._stiffness, 1, out)
+
+    def displacement(self, pressure, out=None):
+        """Zero-mean displacement ``K^{-1} p`` (one transform pair)."""
+        self.operator_applications += 1
+        return self.half_space.displacement(pressure, out)
+
+    def objective_gradient(self, gap, gradient, mean_pressure):
+        """Load-control objective and its gradient (per pixel area, i.e. a pressure).
+
+        Parameters
+        ----------
+        gap : ndarray
+            This rank's gap slab.
+        gradient : ndarray
+            Filled with ``p_el + P0 + v'(g)``, the gradient divided by ``dx dy``.
+        mean_pressure : float
+            ``P0``.
+
+        Returns
+        -------
+        float
+            ``E_el + E_int + P0 A0 mean(g)`` (same on all ranks).
+        """
+        self.elastic_pressure(gap, out=gradient)
+        local = 0.5 * np.vdot(gap + self.topography, gradient) + mean_pressure * gap.sum()
+        if self.interaction.adhesive:
+            local += self.interaction.energy(gap).sum()
+            gradient += self.interaction.derivative(gap)
+        gradient += mean_pressure
+        return self.grid.pixel_area * self.grid.comm.allreduce(float(local))
+
+    # ------------------------------------------------------------ judgement
+    def kkt_residuals(self, gap, pressure, contact):
+        """Unit-free KKT residuals of a state ``(g, p)`` with contact set ``contact``.
+
+        Returns
+        -------
+        (float, float)
+            ``max violation in pressure / (h0' E*)`` -- non-zero pressure (plus
+            interaction stress) off contact, tension in contact -- and
+            ``max violation in gap / h0`` -- gap in contact, penetration off it.
+        """
+        rp = rg = 0.0
+        for rows in _blocks(gap.shape[0]):
+            g, p, c = gap[rows], pressure[rows], contact[rows]
+            stress = p + self.interaction.derivative(g) if self.interaction.adhesive else p
+            free = ~c
+            rp = max(rp, _max_or_zero(np.abs(stress[free])), _max_or_zero(-stress[c]))
+            rg = max(rg, _max_or_zero(np.abs(g[c])), _max_or_zero(-g[free]))
+        pair = np.array([rp, rg])
+        self.grid.comm.Allreduce(MPI.IN_PLACE, pair, op=MPI.MAX)
+        return pair[0] / self.pressure_scale, pair[1] / self.gap_scale
+
+    def make_solution(self, gap, pressure, contact, control, *, converged, reason, solver,
+                      iterations, operator_applications, wall_time, history=(), residuals=None,
+                      start="", start_time=0.0):
+        """Assemble a :class:`ContactSolution` with all derived quantities.
+
+        ``residuals`` overrides the KKT residuals computed from ``gap`` and
+        ``pressure`` (for a solver whose stored gap is a projection of the one
+        it iterated on); ``start`` says how the solver started, where that is
+        more than the control and the warm start say (a coarse-grid solve),
+        and ``start_time`` is the part of ``wall_time`` that start took.
+        """
+        grid = self.grid
+        kkt_p, kkt_g = residuals if residuals is not None else \
+            self.kkt_residuals(gap, pressure, contact)
+        interaction = self.interaction
+        # Sums over the slab in row blocks: no full-size temporaries at the peak.
+        local = np.zeros(8)
+        for rows in _blocks(gap.shape[0]):
+            g, p, c = gap[rows], pressure[rows], contact[rows]
+            repulsive = c & (p > 0)
+            local[:3] += (g.sum(), p.sum(), np.count_nonzero(repulsive))
+            local[7] += np.count_nonzero(g <= 0)
+            if interaction.adhesive:
+                stress = interaction.derivative(g)          # v'(g) >= 0, tensile
+                local[3] += interaction.energy(g).sum()
+                local[4] += (p[c] + stress[c]).sum()       # wall reaction
+                local[5] += stress.sum()
+                local[6] += np.count_nonzero(~repulsive & (g <= interaction.range))
+            else:
+                local[4] += p[c].sum()
+        total = np.empty_like(local)
+        grid.comm.Allreduce(local, total)
+        n = grid.npoints
+        area = grid.pixel_area
+        mean_gap, mean_pressure, c = total[0] / n, total[1] / n, total[2] / n
+        # Force split (GUIDE section 4; paper Eq. 1 and 15): F = A0 P0 = F_rep + F_att
+        # with F_att = -sum dx dy v'(g) (< 0, attractive) and F_rep the wall reaction.
+        repulsive_force, attractive_force = area * total[4], -area * total[5]
+        a_rep = c * grid.area
+        np.add(gap, self.topography, out=grid.real)  # u up to a constant: energy ignores it
+        elastic = self.half_space.energy(grid.real)
+        kappa = a_rep * self.pressure_scale / repulsive_force if (repulsive_force > 0 and a_rep > 0) \
+            else float("nan")
+        # undefined (NaN, as kappa_rep) when attraction acts without repulsive contact
+        inv_kappa_att = (0.0 if not interaction.adhesive else
+                         -attractive_force / (self.pressure_scale * a_rep) if a_rep > 0
+                         else float("nan"))
+        return ContactSolution(
+            gap=gap, pressure=pressure, control=control, mean_gap=mean_gap,
+            mean_pressure=mean_pressure, contact_fraction=c, zero_gap_fraction=total[7] / n,
+            elastic_energy=elastic,
+            interaction_energy=area * total[3], kappa_rep=kappa,
+            repulsive_force=repulsive_force, attractive_force=attractive_force,
+            attractive_fraction=total[6] / n, inv_kappa_att=inv_kappa_att,
+            kkt_pressure=kkt_p, kkt_gap=kkt_g, converged=bool(converged), reason=str(reason),
+            solver=solver, iterations=int(iterations),
+            operator_applications=int(operator_applications), wall_time=float(wall_time),
+            history=list(history), start=str(start), start_time=float(start_time))
+
+
+def _blocks(nrows, points=1 << 16, ncols=None):
+    """Row slices of about ``points`` values, to bound temporaries in reductions."""
+    step = max(1, points // max(ncols or 1024, 1))
+    return [slice(i, min(i + step, nrows)) for i in range(0, nrows, step)]
+
+
+def _max_or_zero(values):
+    return float(values.max()) if values.size else 0.0
+
+
+def judge(residual, tolerance, fresh, iteration, max_iterations, history, monitor):
+    """The verdict of an iterative solver on the residual at the start of an iteration.
+
+    Shared by the conjugate-gradient solvers (:mod:`petgap.solvers.pressure_cg`,
+    :mod:`petgap.solvers.gap_cg`), which update their fields by recurrences between
+    fresh transforms: a converged verdict is only given on a fresh
+    evaluation, so that accumulated round-off never passes for convergence.
+
+    Returns
+    -------
+    str
+        ``"diverged_nan"``; ``"refresh"`` (converged on a recurrence: evaluate
+        afresh and judge again; nothing is recorded); ``"converged_kkt"`` or
+        ``"max_iterations"`` (stop); or ``""`` (carry on).  Except for the first
+        two, the residual is appended to ``history`` and passed to ``monitor``.
+    """
+    if not np.isfinite(residual):
+        return "diverged_nan"
+    if residual <= tolerance and not fresh:
+        return "refresh"
+    history.append(residual)
+    if monitor is not None:
+        monitor(iteration, residual)
+    if residual <= tolerance:
+        return "converged_kkt"
+    if iteration >= max_iterations:
+        return "max_iterations"
+    return ""
+
+
+class Timer:
+    """Wall-clock seconds since construction (``time.perf_counter``)."""
+
+    def __init__(self):
+        self.start = time.perf_counter()
+
+    def __call__(self):
+        return time.perf_counter() - self.start

@@ -1,0 +1,318 @@
+"""The periodic grid, its slab decomposition and its distributed FFT.
+
+One :class:`Grid` owns the communicator and everything that depends on how the
+field is split between ranks; every other module asks it for local slices,
+local wavevectors and transforms, and never reaches for ``COMM_WORLD``.
+
+Conventions
+-----------
+* Global real-space arrays have shape ``(nx, ny)``, axis 0 along x.  Axis 0 is
+  distributed in contiguous blocks of rows (FFTW-MPI slabs); a rank holds rows
+  ``x_slice`` as a C-contiguous ``(nx_local, ny)`` array.
+* Pixel sizes ``dx = Lx / nx`` and ``dy = Ly / ny``; a pixel has area
+  ``dx * dy``; positions are ``x = i dx``, ``y = j dy``.
+* Forward DFT unnormalised, ``f_q = sum_x f(x) exp(-i q.x)``; the inverse divides
+  by ``nx * ny``.  ``q = 2 pi (m / Lx, n / Ly)`` with ``m`` wrapped into
+  ``(-nx/2, nx/2]``.
+* Fourier arrays use FFTW's transposed r2c layout: shape ``(ny // 2 + 1, nx)``,
+  i.e. half plane ``n = 0 .. ny // 2`` along axis 0 (distributed, rows
+  ``ky_slice``) and all ``m`` along axis 1.  Half-plane rows other than ``n = 0``
+  and (``ny`` even) ``n = ny / 2`` stand for two modes, ``q`` and ``-q``;
+  :attr:`Grid.hermitian_weight` holds that multiplicity.
+"""
+import hashlib
+import os
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from petgap.parallel import _fftw_mpi
+
+#: Where FFTW wisdom is cached between runs (override with PETGAP_WISDOM_DIR).
+WISDOM_DIR_ENV = "PETGAP_WISDOM_DIR"
+
+
+class DecompositionError(ValueError):
+    """The grid cannot be split into non-empty slabs on this communicator."""
+
+
+def _aligned_empty(count, dtype, alignment=64):
+    """An uninitialised 1D array of ``count`` items whose data is ``alignment``-aligned.
+
+    FFTW's SIMD codelets want aligned data; NumPy only promises 16 bytes.
+    """
+    dtype = np.dtype(dtype)
+    raw = np.empty(count * dtype.itemsize + alignment, dtype=np.uint8)
+    offset = (-raw.ctypes.data) % alignment
+    return raw[offset:offset + count * dtype.itemsize].view(dtype)
+
+
+class Grid:
+    """A periodic ``nx x ny`` grid of physical size ``Lx x Ly`` split into slabs.
+
+    Parameters
+    ----------
+    shape : (int, int)
+        Number of pixels ``(nx, ny)``; both at least 1.
+    size : (float, float), optional
+        Physical size ``(Lx, Ly)``.  Defaults to ``shape``, i.e. unit pixels.
+    comm : mpi4py.MPI.Comm, optional
+        Communicator of the decomposition (default ``MPI.COMM_WORLD``).
+    planner : {"estimate", "measure", "patient", "exhaustive"}
+        FFTW planner effort.  ``"measure"`` (default) times candidate plans once;
+        the resulting wisdom is cached on disk (see :meth:`wisdom_path`), so later
+        runs on the same grid and rank count plan instantly.
+    wisdom : bool
+        Read and write the on-disk wisdom cache.
+
+    Raises
+    ------
+    DecompositionError
+        On every rank, if some rank would receive no real-space row or no
+        Fourier row (FFTW-MPI distributes rows in blocks of ``ceil(n / P)``).
+    """
+
+    def __init__(self, shape, size=None, comm=None, planner="measure", wisdom=True):
+        self.comm = MPI.COMM_WORLD if comm is None else comm
+        #: FFTW planner effort and wisdom cache use, for grids derived from this one.
+        self.planner, self.wisdom = planner, wisdom
+        nx, ny = _check_shape(shape)
+        lx, ly = (float(nx), float(ny)) if size is None else _check_size(size)
+        self.nx, self.ny, self.Lx, self.Ly = nx, ny, lx, ly
+        self.dx, self.dy = lx / nx, ly / ny
+        self.nky = ny // 2 + 1
+
+        alloc, ln0, l0s, ln1, l1s = _fftw_mpi.local_size_transposed(self.comm, nx, ny)
+        self._check_decomposition()
+        self.x_slice = slice(l0s, l0s + ln0)
+        self.ky_slice = slice(l1s, l1s + ln1)
+        self.local_shape = (ln0, ny)
+        self.fourier_local_shape = (ln1, nx)
+
+        # FFT buffers: the padded real slab and the transposed Fourier slab.
+        self._real_storage = _aligned_empty(2 * alloc, np.float64)
+        self._fourier_storage = _aligned_empty(alloc, np.complex128)
+        self._padded = self._real_storage[:ln0 * 2 * self.nky].reshape(ln0, 2 * self.nky)
+        #: Real-space FFT buffer, ``(nx_local, ny)`` view of the padded slab.
+        self.real = self._padded[:, :ny]
+        #: Fourier-space FFT buffer, ``(nky_local, nx)``.
+        self.fourier = self._fourier_storage[:ln1 * nx].reshape(ln1, nx)
+
+        if wisdom:
+            self._load_wisdom()
+        self._plans = _fftw_mpi.SlabPlans(self.comm, nx, ny, self._real_storage,
+                                          self._fourier_storage, planner)
+        self._convolution = _fftw_mpi.ConvolutionPlans(self.comm, nx, ny, ln0, ln1,
+                                                       self._real_storage,
+                                                       self._fourier_storage, planner)
+        if wisdom and planner != "estimate":
+            self._save_wisdom()
+
+        m = np.fft.fftfreq(nx, d=1.0 / nx)
+        if nx % 2 == 0:
+            m[nx // 2] = nx // 2  # Nyquist counted as +nx/2: |q| is what matters
+        #: Wavevector components along x for the columns of a Fourier slab.
+        self.qx = 2 * np.pi * m / lx
+        #: Wavevector components along y for the local Fourier rows.
+        self.qy = 2 * np.pi * np.arange(l1s, l1s + ln1, dtype=float) / ly
+        n = np.arange(l1s, l1s + ln1)
+        #: Number of full-plane modes each local half-plane row stands for.
+        self.hermitian_weight = np.where((n == 0) | ((ny % 2 == 0) & (n == ny // 2)), 1.0, 2.0)
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def shape(self):
+        """Global shape ``(nx, ny)``."""
+        return (self.nx, self.ny)
+
+    @property
+    def npoints(self):
+        """Number of grid points ``nx * ny``."""
+        return self.nx * self.ny
+
+    @property
+    def pixel_area(self):
+        """Area of one pixel ``dx * dy``."""
+        return self.dx * self.dy
+
+    @property
+    def area(self):
+        """Nominal area ``A0 = Lx * Ly``."""
+        return self.Lx * self.Ly
+
+    def q_magnitude(self):
+        """``|q|`` on this rank's Fourier slab, shape ``fourier_local_shape``."""
+        return np.hypot(self.qx[None, :], self.qy[:, None])
+
+    def local_positions(self):
+        """``(x, y)`` coordinates of this rank's real-space points, each ``local_shape``."""
+        i = np.arange(self.x_slice.start, self.x_slice.stop)
+        j = np.arange(self.ny)
+        return np.meshgrid(i * self.dx, j * self.dy, indexing="ij")
+
+    # ------------------------------------------------------------ transforms
+    def forward(self, field=None):
+        """Forward FFT of ``field`` (or of :attr:`real` as it is) into :attr:`fourier`.
+
+        Parameters
+        ----------
+        field : ndarray, shape ``local_shape``, optional
+            Copied into the real buffer first.
+
+        Returns
+        -------
+        ndarray
+            :attr:`fourier`, overwritten with ``f_q = sum_x f(x) exp(-i q.x)``.
+        """
+        if field is not None:
+            np.copyto(self.real, field)
+        self._plans.forward()
+        return self.fourier
+
+    def convolve_qpower(self, scale, power):
+        """``real <- F^{-1}[scale |q|^power F real]`` in place, the q = 0 mode zeroed.
+
+        The Fourier multiplier of the elastic operators (``power`` +1 for the
+        stiffness, -1 for the compliance), fused with the transforms so that the
+        Fourier slab is swept once (see :class:`petgap.parallel._fftw_mpi.ConvolutionPlans`).
+        ``F^{-1}`` is unnormalised, as in :meth:`backward`: ``scale`` must carry
+        the ``1 / (nx ny)``.  :attr:`fourier` is used as scratch.
+
+        Returns
+        -------
+        ndarray
+            :attr:`real`.
+        """
+        self._convolution.apply(self.qx, self.qy, scale, power)
+        return self.real
+
+    def convolve_qpower_sparse(self, pidx, values, scale, power, out=None, gathered=None):
+        """:meth:`convolve_qpower` of a field that is zero except at the points ``pidx``.
+
+        ``pidx`` are sorted flat indices into the padded real slab (shape
+        ``(nx_local, 2 (ny // 2 + 1))``) and ``values`` the field there.  The
+        result goes to the padded real buffer, or to ``out`` (an array from
+        :meth:`aligned_padded`), or, with ``gathered``, only its values at
+        ``pidx`` are written there (both FFT buffers serve as scratch).  No
+        slab-sized pass is spent on assembling the input or on writing a
+        gathered output (see
+        :meth:`petgap.parallel._fftw_mpi.ConvolutionPlans.apply_sparse`).
+        """
+        self._convolution.apply_sparse(pidx, values, self.qx, self.qy, scale, power, out,
+                                       gathered)
+
+    def aligned_padded(self):
+        """A zeroed array shaped and aligned like the padded real FFT buffer.
+
+        For fields a solver keeps in the padded layout so that transforms can
+        write them directly (``out`` of :meth:`convolve_qpower_sparse`).
+        """
+        padded = self._padded
+        array = _aligned_empty(padded.size, np.float64).reshape(padded.shape)
+        array[...] = 0.0
+        return array
+
+    def backward(self):
+        """Inverse FFT of :attr:`fourier` into :attr:`real`, *without* the ``1/(nx ny)``.
+
+        :attr:`fourier` is destroyed.  Returns :attr:`real`.
+        """
+        self._plans.backward()
+        return self.real
+
+    # ------------------------------------------------------------ reductions
+    def sum(self, local):
+        """Global sum of a local array over all ranks."""
+        return self.comm.allreduce(float(np.sum(local)), op=MPI.SUM)
+
+    def mean(self, local):
+        """Global mean over the real-space grid of a ``local_shape`` array."""
+        return self.sum(local) / self.npoints
+
+    def fourier_sum(self, local_terms):
+        """Full-plane sum of a half-plane quantity (rows weighted by multiplicity)."""
+        return self.comm.allreduce(float(np.sum(self.hermitian_weight[:, None] * local_terms)),
+                                   op=MPI.SUM)
+
+    def gather(self, local, root=0):
+        """Assemble the global ``(nx, ny)`` array on ``root`` (None elsewhere).
+
+        For tests and small grids only: it defeats the point of a slab.
+        """
+        parts = self.comm.gather(np.ascontiguousarray(local), root=root)
+        return np.concatenate(parts, axis=0) if self.comm.rank == root else None
+
+    def local_part(self, global_array):
+        """This rank's rows of a global ``(nx, ny)`` array (a view)."""
+        global_array = np.asarray(global_array)
+        if global_array.shape != self.shape:
+            raise ValueError(f"global array has shape {global_array.shape}, grid is {self.shape}")
+        return global_array[self.x_slice]
+
+    # ---------------------------------------------------------------- wisdom
+    def wisdom_path(self):
+        """File caching FFTW wisdom for this machine and rank count."""
+        root = Path(os.environ.get(WISDOM_DIR_ENV) or Path.home() / ".cache" / "petgap")
+        host = hashlib.sha1(os.uname().nodename.encode()).hexdigest()[:8]
+        return root / f"fftw-wisdom-{host}-np{self.comm.size}.txt"
+
+    def _load_wisdom(self):
+        text = None
+        if self.comm.rank == 0:
+            try:
+                text = self.wisdom_path().read_text()
+            except OSError:
+                text = None
+        _fftw_mpi.import_wisdom(self.comm, text)
+
+    def _save_wisdom(self):
+        text = _fftw_mpi.export_wisdom(self.comm)
+        if self.comm.rank == 0 and text:
+            path = self.wisdom_path()
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                tmp = path.with_suffix(f".{os.getpid()}.tmp")
+                tmp.write_text(text)
+                tmp.replace(path)  # atomic: concurrent runs never see half a file
+            except OSError:
+                pass  # a read-only home only costs planning time next run
+
+    def _check_decomposition(self):
+        """Raise the same DecompositionError on every rank if any slab is empty."""
+        sizes = self.comm.allgather(_fftw_mpi.local_size_transposed(self.comm, self.nx, self.ny)[1:])
+        rows = [s[0] for s in sizes]
+        krows = [s[2] for s in sizes]
+        if min(rows) == 0 or min(krows) == 0:
+            raise DecompositionError(
+                f"a {self.nx} x {self.ny} grid cannot be split over {self.comm.size} ranks: "
+                f"FFTW-MPI gives real-space rows {rows} (of nx = {self.nx}) and Fourier rows "
+                f"{krows} (of ny // 2 + 1 = {self.nky}) per rank, and every rank needs at least "
+                f"one of each; use fewer ranks, or a grid with nx >= ranks and ny // 2 + 1 >= ranks "
+                f"that splits into non-empty blocks of ceil(n / ranks) rows")
+
+    def __repr__(self):
+        return (f"Grid(shape=({self.nx}, {self.ny}), size=({self.Lx:g}, {self.Ly:g}), "
+                f"ranks={self.comm.size}, rows={self.x_slice.start}:{self.x_slice.stop})")
+
+
+def _check_shape(shape):
+    try:
+        nx, ny = (int(n) for n in shape)
+        if (nx, ny) != tuple(shape):
+            raise TypeError
+    except (TypeError, ValueError):
+        raise ValueError(f"grid shape must be two integers (nx, ny), got {shape!r}") from None
+    if nx < 1 or ny < 1:
+        raise ValueError(f"grid shape must be positive, got ({nx}, {ny})")
+    return nx, ny
+
+
+def _check_size(size):
+    try:
+        lx, ly = (float(s) for s in size)
+    except (TypeError, ValueError):
+        raise ValueError(f"grid size must be two numbers (Lx, Ly), got {size!r}") from None
+    if not (np.isfinite(lx) and np.isfinite(ly) and lx > 0 and ly > 0):
+        raise ValueError(f"grid size must be positive and finite, got ({lx}, {ly})")
+    return lx, ly

@@ -1,0 +1,222 @@
+# cython: language_level=3
+"""Fused loops for the solvers' per-iteration work.
+
+Each function makes one pass over this rank's slab and returns the partial
+sums or extrema the caller reduces over MPI.  Arrays are this rank's
+``(nx_local, ny)`` C-contiguous slabs; ``real`` is the grid's padded FFT buffer
+``(nx_local, 2 (ny // 2 + 1))`` of which the first ``ny`` columns are used.
+Fusing matters: one NumPy pass over a 2048^2 slab costs about a tenth of an FFT
+pair, and an unfused iteration would spend more time in passes than in FFTs.
+
+The pressure-based (Polonsky-Keer) solver keeps its contact set as index
+lists instead; its kernels are in ``petgap/_contact_set.pyx``.
+"""
+from libc.math cimport fabs, INFINITY
+
+
+# ---------------------------------------------------------------------------
+# Gap-space preconditioned projected CG (petgap.solvers.gap_cg).  The gradient of the
+# energy per pixel area is ``grad = p_el + v'(g)``; ``vp`` caches ``v'(g)``
+# (computed once per iteration by :func:`gcg_interaction`; for the hard wall
+# ``adh`` is false and ``vp`` is not read).  The free set F is ``g > 0`` or
+# ``grad + lam_f < 0`` (points at the wall that are pulled off it).
+from libc.math cimport exp
+
+
+def gcg_interaction(const double[:, ::1] g, double[:, ::1] vp, double w, double rho):
+    """``vp = (w / rho) exp(-g / rho)``: the one exponential per point per iteration."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double wr = w / rho
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                vp[i, j] = wr * exp(-g[i, j] / rho)
+
+
+def gcg_open_sums(const double[:, ::1] pel, const double[:, ::1] g,
+                  const double[:, ::1] vp, bint adh):
+    """Returns ``(sum of grad over g > 0, count of g > 0)``: the multiplier estimate."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double s = 0.0
+    cdef long count = 0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                if g[i, j] > 0.0:
+                    s += pel[i, j] + (vp[i, j] if adh else 0.0)
+                    count += 1
+    return s, count
+
+
+def gcg_free_sums(const double[:, ::1] pel, const double[:, ::1] g, const double[:, ::1] vp,
+                  bint adh, double lam_f):
+    """Returns ``(sum_F grad, count_F, max_F grad, min_F grad)``."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double gr, s = 0.0, gmax = -INFINITY, gmin = INFINITY
+    cdef long count = 0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
+                if g[i, j] > 0.0 or gr + lam_f < 0.0:
+                    s += gr
+                    count += 1
+                    if gr > gmax:
+                        gmax = gr
+                    if gr < gmin:
+                        gmin = gr
+    return s, count, gmax, gmin
+
+
+def gcg_write_residual(const double[:, ::1] pel, const double[:, ::1] g,
+                       const double[:, ::1] vp, bint adh, double lam_f, double lam,
+                       double[:, ::1] real):
+    """``real = grad + lam`` on F, 0 elsewhere (the residual to precondition)."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double gr
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
+                if g[i, j] > 0.0 or gr + lam_f < 0.0:
+                    real[i, j] = gr + lam
+                else:
+                    real[i, j] = 0.0
+
+
+def gcg_precond_sums(const double[:, ::1] real, const double[:, ::1] pel,
+                     const double[:, ::1] g, const double[:, ::1] vp, bint adh,
+                     double lam_f, double lam):
+    """Returns ``(sum_F z, sum_F r z, sum_F r)`` with ``z = real``, ``r = grad + lam``."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double gr, z, sz = 0.0, srz = 0.0, sr = 0.0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
+                if g[i, j] > 0.0 or gr + lam_f < 0.0:
+                    z = real[i, j]
+                    sz += z
+                    srz += (gr + lam) * z
+                    sr += gr + lam
+    return sz, srz, sr
+
+
+def gcg_direction(double[:, ::1] real, const double[:, ::1] pel, const double[:, ::1] g,
+                  const double[:, ::1] vp, bint adh, double[:, ::1] t, double lam_f,
+                  double zshift, double beta):
+    """``t = -(z - zshift) + beta t`` on F, 0 elsewhere (``z = real``); then ``real = t``."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double gr, v
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
+                if g[i, j] > 0.0 or gr + lam_f < 0.0:
+                    v = -(real[i, j] - zshift) + beta * t[i, j]
+                else:
+                    v = 0.0
+                t[i, j] = v
+                real[i, j] = v
+
+
+def gcg_curvature(const double[:, ::1] real, const double[:, ::1] t, const double[:, ::1] pel,
+                  const double[:, ::1] g, const double[:, ::1] vp, bint adh, double lam,
+                  double rho):
+    """Returns ``(t.K t + sum v''(g) t^2, sum (grad + lam) t, max |t|, min over t < 0 of g / -t)``.
+
+    ``real`` holds ``K t``; ``v'' = -v' / rho`` for the exponential.  The last
+    value is the step at which the first free point would reach the wall.
+    """
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double tv, e, curv = 0.0, slope = 0.0, tmax = 0.0, reach = INFINITY
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                tv = t[i, j]
+                if tv == 0.0:
+                    continue
+                curv += tv * real[i, j]
+                if adh:
+                    e = vp[i, j]
+                    curv -= (e / rho) * tv * tv
+                    slope += (pel[i, j] + e + lam) * tv
+                else:
+                    slope += (pel[i, j] + lam) * tv
+                if fabs(tv) > tmax:
+                    tmax = fabs(tv)
+                if tv < 0.0 and g[i, j] / -tv < reach:
+                    reach = g[i, j] / -tv
+    return curv, slope, tmax, reach
+
+
+def gcg_step(double[:, ::1] g, const double[:, ::1] t, double tau):
+    """``g += tau t``; returns the number of points that went below zero."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double v
+    cdef long negative = 0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                v = g[i, j] + tau * t[i, j]
+                g[i, j] = v
+                if v < 0.0:
+                    negative += 1
+    return negative
+
+
+def axpy(double[:, ::1] y, const double[:, ::1] x, double a):
+    """``y += a x`` (x may be the padded FFT buffer)."""
+    cdef Py_ssize_t i, j, m = y.shape[0], n = y.shape[1]
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                y[i, j] += a * x[i, j]
+
+
+def shifted_positive_sums(const double[:, ::1] y, double mu):
+    """Returns ``(sum max(y + mu, 0), count(y + mu > 0))`` over points off the wall.
+
+    The mean-gap projection's Newton data.  Points exactly at the wall
+    (``y == 0``: in contact and not moved by the step) stay there: the
+    projection acts on the face of the constraint set the iteration is on, so
+    that a shift never lifts the whole contact area off the wall.
+    """
+    cdef Py_ssize_t i, j, m = y.shape[0], n = y.shape[1]
+    cdef double v, s = 0.0
+    cdef long count = 0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                if y[i, j] == 0.0:
+                    continue
+                v = y[i, j] + mu
+                if v > 0.0:
+                    s += v
+                    count += 1
+    return s, count
+
+
+def project_and_load(double[:, ::1] g, double mu, const double[:, ::1] h, double[:, ::1] real):
+    """``g = max(g + mu, 0)`` off the wall (``g == 0`` stays), and ``real = g + h``."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double v
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                v = g[i, j]
+                if v != 0.0:
+                    v = v + mu
+                if v < 0.0:
+                    v = 0.0
+                g[i, j] = v
+                real[i, j] = v + h[i, j]
+
+
+def copy_from(double[:, ::1] y, const double[:, ::1] x):
+    """``y = x`` (x may be the padded FFT buffer)."""
+    cdef Py_ssize_t i, j, m = y.shape[0], n = y.shape[1]
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                y[i, j] = x[i, j]

@@ -1,0 +1,167 @@
+"""A coarse-grid start for the pressure solver: solve a blurred copy of the problem first.
+
+Why: from a uniform pressure, Polonsky-Keer spends its first iterations on a
+contact set of most of the points (about 60 % after the first step on rough
+surfaces, shrinking by some 20 % per iteration), each iteration costing more
+than a late one; and a start nearer the answer built from the geometry alone
+(a rigid approach) proved unstable (see :mod:`petgap.solvers.pressure_cg`).  The
+answer of the same contact on a grid ``f`` times coarser -- the topography
+averaged over ``f x f`` blocks, the same cell, modulus and control -- is such a
+start, and costs ``1/f^2`` per iteration.  Its pressure, repeated over each
+block, starts the fine solve with the set already at the contact fraction of
+the answer.  Measured (H = 0.8, lambda_min = 32 a0, P0 = 0.002 E*, two seeds,
+docs/benchmarks.md): 31-32 / 41-46 / 53-57 iterations from the uniform
+pressure at 512^2 / 1024^2 / 2048^2 become 20 / 25-32 / 35-36, in 0.55-0.65
+of the time, the coarse levels included.  The coarse problem is solved the
+same way, so large grids descend through several levels (1024^2: 256^2,
+64^2, 32^2).
+
+Conventions
+-----------
+* Restriction is the block mean (it keeps the mean height, so a mean-gap
+  control means the same on both grids); prolongation repeats each coarse
+  value over its block (it keeps the mean pressure, so a load control does).
+* The decision to coarsen depends on the grid's shape only (both sides
+  divisible by ``f``, the coarse sides at least :data:`MIN_SIDE`), never on
+  the number of ranks, so that results do not depend on it beyond round-off.
+  Blocks of rows may straddle two ranks' slabs: rows are moved between the
+  two decompositions with one ``Alltoallv`` each way (:func:`_move_rows`).
+* The coarse solve is a start, not a result: its tolerance is
+  ``max(tolerance, COARSE_TOLERANCE)`` and a coarse solve that did not
+  converge still gives its pressure (a NaN gives none: the caller then starts
+  from the uniform pressure).
+"""
+import numpy as np
+from mpi4py import MPI
+
+from petgap.mechanics.problem import ContactProblem
+from petgap.mechanics.half_space import ElasticHalfSpace
+from petgap.parallel.grid import DecompositionError, Grid
+
+#: Smallest side of a coarse grid, in points (below it the uniform start is cheap).
+MIN_SIDE = 32
+#: Coarse solves stop here (or at the fine tolerance if that is looser): a
+#: start needs no more.  Coarse tolerances from 1e-2 to 1e-6 left the fine
+#: solve's iterations within +-2 of each other at 512^2-2048^2 (two seeds each).
+COARSE_TOLERANCE = 1e-4
+
+
+def coarsening_factor(shape):
+    """The block size ``f`` (4 or 2) for a grid of this shape, or None.
+
+    Depends on the shape alone, so every rank count decides alike.
+    """
+    nx, ny = shape
+    for f in (4, 2):
+        if nx % f == 0 and ny % f == 0 and min(nx, ny) // f >= MIN_SIDE:
+            return f
+    return None
+
+
+def coarse_problem(problem):
+    """The block-averaged problem on the coarse grid, made once and kept; None if none.
+
+    Collective.  Kept on ``problem`` (``ContactProblem._coarse``) so that the
+    steps of a sweep share it; about ``1/f^2`` of the fine problem's memory.
+    """
+    if problem._coarse is not False:
+        return problem._coarse
+    grid = problem.grid
+    f = coarsening_factor(grid.shape)
+    coarse = None
+    if f is not None:
+        try:
+            cgrid = Grid((grid.nx // f, grid.ny // f), size=(grid.Lx, grid.Ly), comm=grid.comm,
+                         planner=grid.planner, wisdom=grid.wisdom)
+        except DecompositionError:
+            cgrid = None  # too few coarse rows for this many ranks: no coarse start
+        if cgrid is not None:
+            h = restrict(grid, cgrid, problem.topography, f)
+            coarse = ContactProblem(cgrid, h, ElasticHalfSpace(
+                cgrid, problem.half_space.contact_modulus), problem.interaction)
+    problem._coarse = coarse
+    return coarse
+
+
+def restrict(grid, coarse, field, f):
+    """The block means of ``field`` (this rank's fine slab) on this rank's coarse slab."""
+    m = field.shape[0]
+    x0 = grid.x_slice.start
+    columns = field.reshape(m, grid.ny // f, f).sum(axis=2)
+    first, last = x0 // f, (x0 + m - 1) // f
+    starts = [max(c * f, x0) - x0 for c in range(first, last + 1)]
+    partial = np.add.reduceat(columns, starts, axis=0)  # coarse rows first..last, in part
+    lo, hi = coarse.x_slice.start, coarse.x_slice.stop
+    out = np.zeros(coarse.local_shape)
+    for row, piece in _move_rows(grid.comm, partial, first, lo, hi):
+        out[row - lo:row - lo + len(piece)] += piece  # a straddling block: two parts
+    out /= f * f
+    return out
+
+
+def prolong(coarse, grid, field, f):
+    """``field`` (this rank's coarse slab) repeated over each block, on this rank's fine slab."""
+    m = grid.local_shape[0]
+    x0 = grid.x_slice.start
+    lo, hi = x0 // f, (x0 + m - 1) // f + 1
+    rows = np.empty((hi - lo, field.shape[1]))
+    for row, piece in _move_rows(grid.comm, field, coarse.x_slice.start, lo, hi):
+        rows[row - lo:row - lo + len(piece)] = piece
+    return np.repeat(rows[np.arange(x0, x0 + m) // f - lo], f, axis=1)
+
+
+def _move_rows(comm, block, first, lo, hi):
+    """Give each rank the rows it wants of those held here, in one ``Alltoallv``.
+
+    ``block`` holds global rows ``first, first + 1, ...``; this rank wants rows
+    ``lo <= row < hi`` from whoever holds them.  Returns ``(first row, rows)``
+    for every non-empty piece received, in rank order; pieces overlap where
+    two ranks hold parts of the same row (partial sums).
+    """
+    block = np.ascontiguousarray(block, dtype=float)
+    k, width = block.shape
+    held = comm.allgather((first, first + k))
+    wanted = comm.allgather((lo, hi))
+    send_counts, send_offsets = [], []
+    for a, b in wanted:
+        start, stop = max(a, first), min(b, first + k)
+        rows = max(stop - start, 0)
+        send_counts.append(rows * width)
+        send_offsets.append((start - first) * width if rows else 0)
+    recv_counts, recv_offsets, pieces, total = [], [], [], 0
+    for a, b in held:
+        start, stop = max(a, lo), min(b, hi)
+        rows = max(stop - start, 0)
+        recv_counts.append(rows * width)
+        recv_offsets.append(total)
+        pieces.append((start, rows))
+        total += rows * width
+    received = np.empty(total)
+    comm.Alltoallv([block, (send_counts, send_offsets), MPI.DOUBLE],
+                   [received, (recv_counts, recv_offsets), MPI.DOUBLE])
+    return [(start, received[offset:offset + rows * width].reshape(rows, width))
+            for (start, rows), offset in zip(pieces, recv_offsets) if rows]
+
+
+def coarse_start(problem, control, tolerance, max_iterations):
+    """The fine-grid pressure to start from, and a line saying how it was found.
+
+    Returns ``(None, "")`` when the grid is not coarsened (the caller's own
+    cold start applies) or the coarse solve produced NaN.  Collective.
+    """
+    from petgap.solvers.pressure_cg import polonsky_keer  # which imports this module
+
+    coarse = coarse_problem(problem)
+    if coarse is None:
+        return None, ""
+    solution = polonsky_keer(coarse, control, tolerance=max(tolerance, COARSE_TOLERANCE),
+                             max_iterations=max_iterations)
+    pressure = solution.pressure
+    finite = problem.grid.comm.allreduce(bool(np.isfinite(pressure).all()), op=MPI.LAND)
+    description = (f"coarse {coarse.grid.nx}x{coarse.grid.ny}: {solution.iterations} "
+                   f"iterations, {solution.reason}"
+                   + (f"; {solution.start}" if solution.start.startswith("coarse") else ""))
+    if not finite:
+        return None, description + " (NaN: not used)"
+    factor = problem.grid.nx // coarse.grid.nx
+    return prolong(coarse.grid, problem.grid, pressure, factor), description

@@ -1,0 +1,368 @@
+"""Constrained conjugate gradients on the contact pressure (Polonsky & Keer 1999).
+
+Polonsky & Keer, Wear 231 (1999) 206, with the mean-gap variant and the
+notation of Rey, Anciaux & Molinari, Comput. Mech. 60 (2017) 69.  The unknown is
+the pressure ``p >= 0``; the gap it implies is ``g = K^{-1} p - h + d``.  The
+method runs conjugate gradients on the complementary energy restricted to the
+contact set ``S = {p > 0}``, projects onto ``p >= 0`` after each step, and
+restarts (steepest descent) whenever points that penetrate the surface enter
+the contact set.  Each iteration costs two elastic operator applications (two
+FFT pairs).
+
+* Load control: ``mean(p) = P0`` is kept by rescaling ``p`` after each step,
+  and ``d`` is chosen so that the mean gap over ``S`` vanishes.
+* Mean-gap control: ``d = g_bar + mean(h)`` follows from ``mean(g) = g_bar``
+  (``K^{-1} p`` has zero mean), no rescaling; ``mean(p)`` is the multiplier.
+
+Preconditioning (petgap's addition)
+-----------------------------------
+The compliance ``K^{-1}`` (symbol ``2 / (E* |q|)``) restricted to the contact
+set has a condition number that grows like ``L / a0``, which is why plain
+Polonsky-Keer needs more iterations on finer grids.  Its opposite-order
+partner, the stiffness ``K`` (symbol ``E* |q| / 2``) restricted to the same set,
+is an almost exact inverse up to edge effects, leaving a condition number that
+grows only like ``log^2(L / a0)`` -- operator preconditioning of first-kind
+boundary integral equations (Steinbach & Wendland, Adv. Comput. Math. 9 (1998)
+191; Hiptmair, Jerez-Hanckes & Urzua for screens).  With
+``z = P_S K P_S g`` the iteration count stays nearly flat with resolution at the
+price of a third transform pair per iteration (two once the contact set has
+settled, see below).
+
+When an iteration changes no point of the contact set (no projection, no
+point enters), ``K^{-1} p`` follows ``p`` by the conjugate-gradient recurrence
+``u <- s (u - tau r)`` and the next fresh transform is skipped; a fresh
+transform is forced every 50 such steps and before any verdict, so round-off
+cannot accumulate into the answer.
+
+The contact set is stored as sorted index lists, with the pressure, the
+conjugate direction, the gap and the preconditioned gap kept on it only
+(:mod:`petgap.solvers.contact_set`, kernels in ``petgap/_contact_set.pyx``), and the
+transforms take their input from those lists and, for ``P_S K P_S g``, give
+their output back on them (:meth:`petgap.mechanics.half_space.ElasticHalfSpace.apply_sparse`):
+at a few percent contact an iteration then streams the slab through memory
+once (the gap pass, which only reads) besides the transforms, instead of half
+a dozen times.  The displacement ``u = K^{-1} p`` is the one full field kept
+between iterations, in the padded layout the transform writes it in; the gap
+``g = u - h + d`` is recomputed where it is needed.
+
+Cold start: from the solution on a grid 2 or 4 times coarser where the
+grid's shape allows (:mod:`petgap.solvers.coarse`; about half the time at 512^2 and
+1024^2), otherwise, under load control, from a uniform pressure.  The
+uniform start's first iteration has a closed form
+(:func:`_uniform_first_iteration`: one transform instead of three, and no
+set of every point), after which about 60 % of the points are in S on rough
+surfaces; the set shrinks from there by some 20 % per iteration, updated in
+place, so its peak is one copy of that first set (32 bytes per point of it).
+A start nearer the answer built from the geometry alone (the rigid approach
+carrying the load) saved 5-15 % of the iterations but did not converge on
+some surfaces (see the comment in :func:`polonsky_keer`).
+
+Convergence is judged at the start of an iteration, on the pair ``(p, g)`` the
+iteration starts from, by the gap residual of
+:meth:`petgap.mechanics.problem.ContactProblem.kkt_residuals` (the pressure residual is
+zero by construction: ``p >= 0`` and ``p = 0`` off ``S``).
+"""
+import numpy as np
+from mpi4py import MPI
+
+from petgap.solvers import _contact_set as _cs
+from petgap.solvers import coarse
+from petgap.mechanics.problem import Load, MeanGap, Timer, judge
+from petgap.solvers.contact_set import INDEX, ContactSet
+
+
+def _sums(comm, *values):
+    buf = np.array(values, dtype=float)
+    comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
+    return buf
+
+
+def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
+                  initial_pressure=None, monitor=None, preconditioned=True, coarse_start=True):
+    """Solve non-adhesive contact under load or mean-gap control.
+
+    Parameters
+    ----------
+    problem : petgap.mechanics.problem.ContactProblem
+        Must be non-adhesive.
+    control : Load or MeanGap
+    tolerance : float
+        Target for the gap KKT residual ``max|g on S|, max(-g off S)`` over ``h0``.
+    max_iterations : int
+    initial_pressure : ndarray, optional
+        Warm start (e.g. the previous step of a sweep); copied.
+    monitor : callable, optional
+        ``monitor(iteration, residual)`` on every rank at every iteration.
+    preconditioned : bool
+        Precondition the conjugate gradients with the stiffness restricted to
+        the contact set, ``z = P_S K P_S g`` (see the module docstring).
+    coarse_start : bool
+        Without ``initial_pressure``, start from the solution on a coarser
+        grid where the shape allows one (:mod:`petgap.solvers.coarse`); recorded in
+        the solution's ``start``.
+
+    Returns
+    -------
+    petgap.mechanics.problem.ContactSolution
+    """
+    if problem.interaction.adhesive:
+        raise ValueError("the Polonsky-Keer solver handles non-adhesive contact only; "
+                         "use a gap-based solver for adhesion")
+    grid, comm = problem.grid, problem.grid.comm
+    h = problem.topography
+    timer = Timer()
+    refresh_interval = 50  # bound the round-off drift of the u recurrence
+    n = grid.npoints
+    n_local, ny = h.size, grid.ny
+    load = isinstance(control, Load)
+    if load:
+        target = float(control.mean_pressure)
+        if target == 0:
+            return touching_state(problem, control, timer)
+        if not target > 0:
+            raise ValueError(f"mean pressure {target} < 0: a non-adhesive interface cannot "
+                             f"carry a tensile load; use a positive load or an adhesive interaction")
+    elif isinstance(control, MeanGap):
+        target = float(control.mean_gap)
+        if not target >= 0:
+            raise ValueError(f"mean gap {target} < 0 is impossible with a hard wall (gap >= 0)")
+    else:
+        raise TypeError(f"unknown control {control!r}")
+
+    start = "warm" if initial_pressure is not None else ""
+    if initial_pressure is None and coarse_start:
+        initial_pressure, start = coarse.coarse_start(problem, control, tolerance,
+                                                      max_iterations)
+    start_time = timer()
+    if initial_pressure is None:
+        start = "; ".join(filter(None, [
+            start, "uniform pressure" if load else "overlap of the undeformed surfaces"]))
+    start_ops = problem.operator_applications
+    # The contact set S = {p > 0} as sorted index lists, with p and the
+    # conjugate direction t stored on S only (see petgap/contact_set.py).
+    mask = np.zeros(grid.local_shape, dtype=np.uint8)
+    padded = grid._padded
+    padded_width = padded.shape[1]
+    offset = problem.mean_height + target if not load else 0.0
+    if initial_pressure is not None or not load:
+        if initial_pressure is not None:
+            p = np.asarray(initial_pressure, dtype=float)
+        else:
+            # Mean-gap control: pressure where the undeformed surfaces overlap.
+            p = (h - offset) * (problem.pressure_scale / problem.gap_scale)
+        # S = {p > 0}, with p there: the negative part is dropped on the way in
+        # (no pass of its own), and p is rescaled to the load on S alone.
+        contact = ContactSet.from_pressure(mask, padded_width, p)
+        del p
+        if load:
+            total = _sums(comm, contact.p.sum())[0]
+            if total > 0:
+                contact.p[...] *= target * n / total
+            else:
+                contact = ContactSet.everywhere(mask, padded_width, target)
+    else:
+        # Load control from a uniform pressure: every point starts in S, which
+        # then shrinks to the points that carry the load.  Robust where starts
+        # nearer the answer are not: a rigid approach with a local contact
+        # stiffness overshoots the long wavelengths (the compliance 2 / (E* q)
+        # is large there), so the first displacement makes whole valleys
+        # penetrate; their entering pressures, rescaled to the load, then crush
+        # the summits, and the set oscillated at 20-60 % of the points without
+        # converging (seen at 1024^2 and 8192^2).
+        contact = None
+    overlap = np.empty(max(1024, n // (100 * comm.size)), dtype=INDEX)
+    # u = K^{-1} p, kept in the padded layout so that the transform writes it
+    # there directly; its first columns double as scratch for the closed-form
+    # first iteration's pressure.
+    u = grid.aligned_padded()
+    half_space = problem.half_space
+    scale, fresh = 1.0, True
+    since_fresh = 0
+    delta, g_old, shift = 0.0, 1.0, 0.0
+    history = []
+    converged, reason, it = False, "max_iterations", 0
+    first = 0
+    if contact is None:
+        # Its first iteration in closed form (one transform instead of three,
+        # and no set of every point); the uniform set itself only where that
+        # iteration is also the last.
+        scratch = u.reshape(-1)[:n_local].reshape(grid.local_shape)
+        first_step = _uniform_first_iteration(problem, mask, padded_width, target, scratch,
+                                              tolerance, max_iterations, monitor)
+        if first_step is None:
+            contact = ContactSet.everywhere(mask, padded_width, target)
+        else:
+            contact, scale, delta, g_old, residual = first_step
+            history.append(residual)
+            first = 1
+    for it in range(first, max_iterations + 1):
+        idx, pidx, pS, tS, gS = contact.idx, contact.pidx, contact.p, contact.t, contact.g
+        if fresh:
+            # u = K^{-1} p from scratch: one transform pair, from S to u
+            if scale != 1.0:
+                pS *= scale
+                scale = 1.0
+            half_space.apply_sparse(pidx, pS, inverse=True, out=u)
+            problem.operator_applications += 1
+            since_fresh = 0
+        else:
+            since_fresh += 1
+        n_contact, sum_g = _sums(comm, len(idx), _cs.gather_gap(u, pidx, h, idx, offset, gS))
+        shift = sum_g / n_contact if (load and n_contact > 0) else 0.0
+        in_max, g_norm = _cs.shift_and_norms(gS, shift)
+        pen_max, n_over = _cs.gap_pass(u, h, mask, offset - shift, overlap)
+        if n_over > len(overlap):
+            overlap = np.empty(2 * n_over, dtype=INDEX)
+            _cs.collect_overlap(u, h, mask, offset - shift, overlap)
+        norms = np.array([in_max, pen_max])
+        comm.Allreduce(MPI.IN_PLACE, norms, op=MPI.MAX)
+        residual = float(norms.max()) / problem.gap_scale
+        verdict = judge(residual, tolerance, fresh, it, max_iterations, history, monitor)
+        if verdict == "refresh":
+            fresh, scale = True, 1.0
+            continue
+        if verdict:
+            converged, reason = verdict == "converged_kkt", verdict
+            break
+        if n_contact == 0 or (load and n_contact == 1):
+            # Mean-gap control with no contact yet, or load control on a single
+            # contact point (e.g. warm-started from a one-pixel contact), where no
+            # direction has zero mean over S and the step would break down: let the
+            # points where the surfaces overlap into S; `scale` restores the load.
+            g = u[:, :ny] - h + (offset - shift)
+            g.ravel()[idx] = 0.0
+            points = np.flatnonzero(g < 0)
+            extra = -g.ravel()[points] * (problem.pressure_scale / problem.gap_scale)
+            del g, idx, pidx, pS, tS, gS
+            contact.merge(points, extra)
+            scale = target * n / _sums(comm, contact.p.sum())[0] if load else 1.0
+            delta, fresh = 0.0, True
+            continue
+        if preconditioned:
+            # z = P_S K P_S g (one pair, from S to S), made zero-mean on S
+            # under load control
+            zS = contact.z
+            half_space.apply_sparse(pidx, gS, inverse=False, gathered=zS)
+            problem.operator_applications += 1
+            sum_z, gz, g_sq = _sums(comm, *_cs.z_sums(zS, gS), g_norm)
+            zshift = sum_z / n_contact if load else 0.0
+            # Pressure per unit penetration given to entering points (below):
+            # plain Polonsky-Keer steps along the gap, so its step length tau
+            # is a stiffness, the Rayleigh quotient of the compliance's inverse
+            # on the gap; here tau is a pure number and the direction a
+            # pressure, so the same scale is supplied explicitly, as the
+            # Rayleigh quotient (g, K g) / (g, g) of the stiffness on the gap.
+            stiffness = gz / g_sq if g_sq > 0 else 0.0
+            g_norm = gz
+            _cs.direction(zS, zshift, delta * g_norm / g_old, tS)
+        else:
+            g_norm = _sums(comm, g_norm)[0]
+            stiffness = 1.0
+            _cs.direction(gS, 0.0, delta * g_norm / g_old, tS)
+        g_old = g_norm
+        # The image r = K^{-1} t of the direction: one transform pair, from S
+        # to the whole slab (the recurrence below needs r everywhere)
+        half_space.apply_sparse(pidx, tS, inverse=True)
+        problem.operator_applications += 1
+        sum_r, sum_gt, sum_rt, sum_t = _sums(comm, *_cs.step_sums(padded, pidx, gS, tS))
+        if load:
+            sum_rt -= sum_r / n_contact * sum_t  # r minus its mean over S
+        if not sum_rt > 0:
+            reason = "breakdown"
+            break
+        tau = sum_gt / sum_rt
+        entering, clipped, sum_p = _cs.update(pS, tS, gS, tau, tau * stiffness)
+        added = overlap[:min(n_over, len(overlap))]
+        added_p = np.empty(len(added))
+        sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau * stiffness, added_p)
+        n_overlap, n_clipped, sum_p = _sums(comm, entering + len(added), clipped, sum_p)
+        delta = 0.0 if n_overlap > 0 else 1.0
+        scale = target * n / sum_p if load else 1.0
+        if clipped or len(added):
+            del idx, pidx, pS, tS, gS  # views of buffers merge may replace
+            zS = None
+            contact.merge(added, added_p)
+        # Same contact set, no projection: u follows p linearly, no transform needed.
+        fresh = n_overlap > 0 or n_clipped > 0 or since_fresh >= refresh_interval
+        if not fresh:
+            _cs.recurrence(u, padded, tau, scale, ny)
+            contact.p[...] *= scale
+            scale = 1.0
+
+    # Residuals are taken on the gap as computed; the stored field (and the
+    # scalars derived from it) is its projection onto the contact state found:
+    # exactly 0 in contact, >= 0 elsewhere, within the reported kkt_gap h0.
+    # The pressure residual is zero by construction (p > 0 on S, 0 off it).
+    # The gap is written over u, compacted to the unpadded layout in place (no
+    # new slab to allocate and fault in): row i moves to where it starts at or
+    # before its old place, so nothing is overwritten before it is read.
+    g = u.reshape(-1)[:n_local].reshape(grid.local_shape)
+    on, off = _cs.final_gap(u, h, mask, offset - shift, g)
+    del u
+    residuals = (0.0, comm.allreduce(float(np.max([on, off])), op=MPI.MAX) / problem.gap_scale)
+    p = np.zeros(grid.local_shape)
+    p.ravel()[contact.idx] = contact.p
+    contact = mask.view(bool)  # 0 or 1: a valid boolean array, no copy
+    return problem.make_solution(
+        g, p, contact, control, converged=converged, reason=reason,
+        solver="pcg-pressure", iterations=it, wall_time=timer(), history=history,
+        operator_applications=problem.operator_applications - start_ops, residuals=residuals,
+        start=start, start_time=start_time)
+
+
+def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, max_iterations,
+                             monitor):
+    """Iteration 0 of a load-controlled cold start from the uniform pressure, in closed form.
+
+    From ``p = P0`` everywhere, ``u = K^{-1} p = 0`` (no q = 0 mode), so the
+    iteration's gap (shifted to zero mean over S, here every point) is
+    ``g = mean(h) - h``, its preconditioned gap ``z = K g``, its direction
+    ``t = z - mean(z)``, the image of that ``r = K^{-1} t = g``, and the step
+    ``tau = (g, t) / (r, t) = 1``: the general iteration's three transforms
+    reduce to one, and its pressure update to ``P0 - t`` projected, with the
+    entering pressure of :func:`polonsky_keer` where that clips a penetrating
+    point.  The set of every point is never built: the new set (about 60 %
+    of the points on rough surfaces) is made from the updated pressure,
+    written to ``p`` (a ``local_shape`` array the caller does not need yet).
+
+    Returns ``(contact set, scale restoring the load, delta, g_old, residual)``
+    for the iteration loop to carry on from iteration 1, or None when iteration
+    0 is also the last (converged, e.g. on a flat surface, or no iteration
+    allowed): then the caller runs it the general way.
+    """
+    grid, comm, h = problem.grid, problem.grid.comm, problem.topography
+    padded = grid._padded
+    hbar = problem.mean_height
+    g_max, g_sq = _cs.uniform_gap(padded, h, hbar)
+    g_sq = _sums(comm, g_sq)[0]
+    if not np.isfinite(g_sq):  # decided alike on every rank (a NaN sum is NaN everywhere)
+        return None
+    residual = comm.allreduce(g_max, op=MPI.MAX) / problem.gap_scale
+    if residual <= tolerance or max_iterations < 1:
+        return None
+    if monitor is not None:
+        monitor(0, residual)
+    problem.half_space.apply_in_buffer(inverse=False)   # z = K g
+    problem.operator_applications += 1
+    sum_z, gz = _sums(comm, *_cs.uniform_sums(padded, h, hbar))
+    zshift = sum_z / grid.npoints
+    entry = gz / g_sq  # tau (= 1) times the stiffness's Rayleigh quotient on g
+    n_overlap, _, sum_p = _sums(comm, *_cs.uniform_step(padded, h, hbar, zshift, target,
+                                                        entry, p))
+    # Only shrinking is expected from here: no spare capacity.
+    contact = ContactSet.from_pressure(mask, padded_width, p, spare=1.0)
+    _cs.direction_from_buffer(padded, contact.pidx, zshift, 0.0, contact.t)
+    delta = 0.0 if n_overlap > 0 else 1.0
+    return contact, target * grid.npoints / sum_p, delta, gz, residual
+
+
+def touching_state(problem, control, timer=None):
+    """Zero load: the surfaces touch at the highest point and carry nothing."""
+    grid = problem.grid
+    top = grid.comm.allreduce(float(problem.topography.max()), op=MPI.MAX)
+    gap = top - problem.topography
+    pressure = np.zeros(grid.local_shape)
+    return problem.make_solution(gap, pressure, pressure > 0, control, converged=True,
+                                 reason="zero_load", solver="pcg-pressure", iterations=0,
+                                 operator_applications=0,
+                                 wall_time=timer() if timer is not None else 0.0)

@@ -1,0 +1,562 @@
+"""Bad input and faults, met the way a user meets them: ``petgap run`` in a subprocess.
+
+Pass criteria, for every failure: a non-zero exit (2 for a user error), a message
+naming the problem (once, without a traceback, for a user error), no hang (every
+subprocess has a timeout), no process of the job left running, and no completed
+result lost, truncated or overwritten.  For a run interrupted mid-sweep (SIGTERM to
+``mpirun`` or to every rank, SIGKILL of one rank, a full disk): the steps marked
+complete read back whole and equal an uninterrupted run's, and rerunning the same
+command continues the run to the same final results.
+
+The job is driven from rank 0 (the other pytest rank sleeps in
+:func:`conftest.wait_for_root`), and every rank asserts on the outcome it is
+handed.  To make an interruption land at a known place, the ranks are stopped
+(SIGSTOP) when the progress log shows the trigger line, the signal is sent, and
+the ranks are continued (by ``mpirun`` itself when it is the one signalled): a
+signal delivered to a stopped process acts when it resumes, where it stopped.
+"""
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from conftest import clean_env, wait_for_root
+from petgap.io.results import FREE_SPACE_MARGIN, read_attrs
+
+import h5py  # after petgap.io.results, which selects the MPI build  # noqa: E402
+
+COMM = MPI.COMM_WORLD
+
+# A 64^2 run of the paper's protocol: 4 non-adhesive steps, then 4 adhesive steps at
+# the mean gaps the first found (so a resumed adhesive step reads its reference back).
+SWEEP = """
+[grid]
+nx = 64
+
+[surface]
+hurst = 0.8
+lambda_min = "8 a0"
+seed = 3
+
+[interaction]
+kind = "exponential"
+work_of_adhesion = 0.002
+range = "1 a0"
+
+[control]
+kind = "load"
+values = [0.001, 0.002, 0.004, 0.008]
+reference = "non-adhesive"
+
+[solver]
+planner = "estimate"
+"""
+NSTEPS = 8
+SHAPE = (64, 64)
+
+SMALL = """
+[grid]
+nx = 32
+
+[surface]
+hurst = 0.8
+lambda_min = "8 a0"
+seed = 3
+
+[control]
+kind = "load"
+values = [0.002, 0.004]
+
+[solver]
+planner = "estimate"
+"""
+
+FILE_SCENE = """
+[grid]
+nx = 32
+
+[surface]
+kind = "file"
+path = "{path}"
+{extra}
+[control]
+kind = "load"
+values = [0.002]
+
+[solver]
+planner = "estimate"
+"""
+
+
+# ------------------------------------------------------------------ helpers
+def _mpirun(args, ranks=2):
+    return ["mpirun", "-n", str(ranks), "--oversubscribe"] + [str(a) for a in args]
+
+
+def _alive(token):
+    """Pids of live processes whose command line contains ``token`` (rank 0 only)."""
+    out = subprocess.run(["pgrep", "-f", str(token)], capture_output=True, text=True).stdout
+    pids = []
+    for pid in map(int, out.split()):
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if state != "Z" and pid != os.getpid():
+            pids.append(pid)
+    return pids
+
+
+def _leftovers(token, grace=10.0):
+    """Processes still running ``grace`` seconds after a job ended (rank 0 only)."""
+    deadline = time.monotonic() + grace
+    while _alive(token) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return _alive(token)
+
+
+def _finish(proc, token, timeout):
+    """Wait for a job; on timeout kill it and its ranks (by pid) and report a hang."""
+    try:
+        proc.wait(timeout=timeout)
+        return False
+    except subprocess.TimeoutExpired:
+        for pid in [proc.pid] + _alive(token):
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        proc.wait()
+        return True
+
+
+def run_many(jobs, timeout=60, parallel=3):
+    """Run ``(args, token)`` jobs concurrently from rank 0; their outcomes on every rank.
+
+    Each outcome: ``returncode``, ``stdout``, ``stderr``, ``hung`` and ``leftovers``
+    (pids still running with ``token`` in their command line).
+    """
+    def one(job):
+        args, token = job
+        with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+            proc = subprocess.Popen(args, stdout=out, stderr=err, env=clean_env(),
+                                    start_new_session=True)
+            hung = _finish(proc, token, timeout)
+            out.seek(0)
+            err.seek(0)
+            return {"returncode": proc.returncode, "stdout": out.read(), "stderr": err.read(),
+                    "hung": hung, "leftovers": _leftovers(token)}
+
+    def run():
+        with ThreadPoolExecutor(parallel) as pool:
+            return list(pool.map(one, jobs))
+    return wait_for_root(run)
+
+
+def _rank_pids(mpirun_pid, ranks, timeout=30.0):
+    """``{rank: pid}`` of the processes ``mpirun`` started (its children)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        out = subprocess.run(["pgrep", "-P", str(mpirun_pid)], capture_output=True,
+                             text=True).stdout
+        found = {}
+        for pid in map(int, out.split()):
+            try:
+                env = Path(f"/proc/{pid}/environ").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            for item in env:
+                if item.startswith(b"OMPI_COMM_WORLD_RANK="):
+                    found[int(item.split(b"=")[1])] = pid
+        if len(found) == ranks:
+            return found
+        time.sleep(0.01)
+    raise RuntimeError(f"could not find the {ranks} ranks of mpirun {mpirun_pid}")
+
+
+def interrupt(args, workdir, trigger, action, token, timeout=90, env=None):
+    """Start ``mpirun -n 2 args``; when ``trigger`` shows in its log, stop the ranks, do
+    ``action`` (``"term-mpirun"``, ``"term-ranks"`` or ``"kill-rank1"``), continue them.
+
+    Runs on rank 0 (inside :func:`wait_for_root`).  Returns the job's outcome.
+    """
+    log_out, log_err = workdir / f"{token}.out", workdir / f"{token}.err"
+    with open(log_out, "w") as out, open(log_err, "w") as err:
+        proc = subprocess.Popen(_mpirun(args), stdout=out, stderr=err, env=clean_env(env),
+                                start_new_session=True)
+    ranks = _rank_pids(proc.pid, 2)
+    deadline = time.monotonic() + timeout
+    triggered = False
+    while time.monotonic() < deadline and proc.poll() is None:
+        if trigger in log_out.read_text():
+            triggered = True
+            break
+        time.sleep(0.002)
+    if triggered:
+        for pid in ranks.values():
+            os.kill(pid, signal.SIGSTOP)
+        if action == "term-mpirun":
+            os.kill(proc.pid, signal.SIGTERM)  # mpirun continues and terminates the ranks
+        elif action == "term-ranks":
+            for pid in ranks.values():
+                os.kill(pid, signal.SIGTERM)
+        elif action == "kill-rank1":
+            os.kill(ranks[1], signal.SIGKILL)
+        if action != "term-mpirun":  # mpirun continues its ranks itself to end them
+            for pid in ranks.values():
+                try:
+                    os.kill(pid, signal.SIGCONT)
+                except ProcessLookupError:
+                    pass
+    hung = _finish(proc, token, timeout)
+    return {"returncode": proc.returncode, "stdout": log_out.read_text(),
+            "stderr": log_err.read_text(), "hung": hung, "triggered": triggered,
+            "leftovers": _leftovers(token), "ranks": ranks}
+
+
+def read_result(path):
+    """Root attributes and ``{index: (attrs, gap, pressure)}`` of the complete steps,
+    read whole with h5py on rank 0 and handed to every rank (None if it does not open)."""
+    def read():
+        try:
+            f = h5py.File(path, "r")
+        except OSError as exc:
+            return {"error": str(exc)}
+        with f:
+            steps, incomplete = {}, []
+            for name in f:
+                if not name.startswith("step_"):
+                    continue
+                group = f[name]
+                attrs = read_attrs(group)
+                if attrs.get("complete") is True:
+                    steps[int(name[5:])] = (attrs, group["gap"][...], group["pressure"][...])
+                else:
+                    incomplete.append(name)
+            return {"attrs": read_attrs(f), "steps": steps, "incomplete": incomplete,
+                    "topography": f["topography"][...]}
+    return wait_for_root(read)
+
+
+SCALARS = ("mean_gap", "mean_pressure", "contact_fraction", "iterations", "converged",
+           "reason", "elastic_energy", "kkt_pressure", "kkt_gap")
+
+
+def assert_steps_equal(result, reference, indices):
+    """Steps ``indices`` of ``result`` are complete, whole, and equal the reference's."""
+    assert "error" not in result, result.get("error")
+    assert sorted(result["steps"]) == sorted(indices), (sorted(result["steps"]), indices)
+    for i in indices:
+        attrs, gap, pressure = result["steps"][i]
+        ref_attrs, ref_gap, ref_pressure = reference["steps"][i]
+        assert gap.shape == SHAPE and pressure.shape == SHAPE
+        assert np.all(np.isfinite(gap)) and np.all(np.isfinite(pressure))
+        assert attrs["solution.converged"] is True
+        # the same scene on the same ranks from the same state: the same arithmetic
+        np.testing.assert_array_equal(gap, ref_gap)
+        np.testing.assert_array_equal(pressure, ref_pressure)
+        for key in SCALARS:
+            assert attrs[f"solution.{key}"] == ref_attrs[f"solution.{key}"], (i, key)
+    np.testing.assert_array_equal(result["topography"], reference["topography"])
+
+
+def assert_prefix(result, at_least, reference):
+    """The complete steps are 0..k-1 with at_least <= k < NSTEPS; returns k."""
+    assert "error" not in result, result.get("error")
+    k = len(result["steps"])
+    assert sorted(result["steps"]) == list(range(k)), sorted(result["steps"])
+    assert at_least <= k < NSTEPS, k
+    assert result["attrs"]["complete"] is False
+    assert_steps_equal(result, reference, range(k))
+    return k
+
+
+def assert_resumed(proc, result, reference, already):
+    """A rerun of the same command continued the run and completed it."""
+    assert not proc["hung"] and proc["returncode"] == 0, proc["stderr"][-3000:]
+    assert "continuing an interrupted run" in proc["stdout"]
+    assert proc["stdout"].count("complete in the file, not recomputed") == already
+    assert proc["leftovers"] == []
+    assert result["attrs"]["complete"] is True and result["attrs"]["resume_count"] >= 1
+    assert result["incomplete"] == []
+    assert_steps_equal(result, reference, range(NSTEPS))
+
+
+# ----------------------------------------------------------------- fixtures
+@pytest.fixture(scope="module")
+def shared():
+    """A directory shared by all ranks for the whole module."""
+    path = tempfile.mkdtemp(prefix="petgap-faults-") if COMM.rank == 0 else None
+    path = Path(COMM.bcast(path, root=0))
+    yield path
+    COMM.Barrier()
+    if COMM.rank == 0:
+        shutil.rmtree(path, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def reference(shared):
+    """The sweep run without interruption (2 ranks): what every interrupted run must match."""
+    scene = shared / "reference.toml"
+    out = shared / "reference.h5"
+    if COMM.rank == 0:
+        scene.write_text(SWEEP)
+    COMM.Barrier()
+    (proc,) = run_many([(_mpirun(["petgap", "run", scene, "-o", out, "-q"]), out)], timeout=120)
+    assert proc["returncode"] == 0 and not proc["hung"], proc["stderr"][-3000:]
+    result = read_result(out)
+    assert result["attrs"]["complete"] is True and sorted(result["steps"]) == list(range(NSTEPS))
+    result["path"] = out
+    return result
+
+
+def _case_dir(shared, name):
+    path = shared / name
+    if COMM.rank == 0:
+        path.mkdir()
+        (path / "sweep.toml").write_text(SWEEP)
+    COMM.Barrier()
+    return path
+
+
+# -------------------------------------------------------------- bad input
+def _bad_input_cases(d):
+    """``(name, args, fragments that the one error line must contain)``; files made on rank 0."""
+    def scene(name, text):
+        path = d / f"{name}.toml"
+        path.write_text(text)
+        return path
+
+    rng = np.random.default_rng(1)
+    h = rng.standard_normal((32, 32))
+    nan, inf = h.copy(), h.copy()
+    nan[3, 5], inf[30, 7] = np.nan, -np.inf
+    np.save(d / "nan.npy", nan)
+    np.save(d / "inf.npy", inf)
+    np.save(d / "narrow.npy", h[:, :31])
+    np.save(d / "cube.npy", h[None])
+    many = (SMALL.replace("nx = 32", "nx = 32.5")
+            .replace("seed = 3", 'seed = 3\nroughness = 2\nrms_height = -0.5')
+            .replace('"8 a0"', '"8 nm"').replace("0.002, 0.004", '"0.002 MPa"')
+            .replace("[solver]", "[solvr]"))
+    cases = [
+        ("malformed", SMALL.replace("nx = 32", "nx = = 32"), ["not valid TOML", "line 3"]),
+        # every problem of a scene is reported at once, each naming its key
+        ("many-errors", many, ["6 errors", "grid.nx = 32.5: not an integer",
+                               "surface.roughness = 2: unknown key",
+                               "surface.rms_height = -0.5: out of range",
+                               'surface.lambda_min = "8 nm": not a length', '"32 a0"',
+                               'control.values = ["0.002 MPa"]', "not a number",
+                               "[solvr]: unknown section (did you mean [solver]?)"]),
+        ("negative-load", SMALL.replace("0.002, 0.004", "0.002, -0.004"),
+         ["control.values", "load <= 0 with a hard-wall interaction"]),
+        ("topography-nan", FILE_SCENE.format(path="nan.npy", extra=""),
+         ["nan.npy", "non-finite", "(3, 5)"]),
+        ("topography-inf", FILE_SCENE.format(path="inf.npy", extra=""),
+         ["inf.npy", "non-finite", "(30, 7)"]),
+        ("topography-shape", FILE_SCENE.format(path="narrow.npy", extra=""),
+         ["narrow.npy", "shape (32, 31)", "grid is (32, 32)"]),
+        ("topography-3d", FILE_SCENE.format(path="cube.npy", extra=""),
+         ["cube.npy", "3D", "must be 2D"]),
+        ("topography-missing", FILE_SCENE.format(path="absent.npy", extra=""),
+         ["surface.path", "absent.npy", "no such file"]),
+    ]
+    jobs = [(name, ["petgap", "run", scene(name, text), "-o", d / f"{name}.h5"], fragments)
+            for name, text, fragments in cases]
+    jobs.append(("scene-missing", ["petgap", "run", d / "absent.toml", "-o", d / "x.h5"],
+                 ["absent.toml", "not found"]))
+    jobs.append(("output-dir-missing", ["petgap", "run", scene("valid-1", SMALL), "-o",
+                                        d / "nowhere" / "r.h5"], ["nowhere", "does not exist"]))
+    jobs.append(("output-is-dir", ["petgap", "run", scene("valid-2", SMALL), "-o", d],
+                 [str(d), "is a directory"]))
+    return jobs
+
+
+def test_bad_input_is_one_clean_error(comm, shared):
+    """Malformed TOML, unknown keys, wrong signs, units and types, NaN/inf or misshapen
+    topographies, missing files and output directories: each is exit 2 with
+    one ``petgap: error:`` line naming the key or file and the problem, no traceback,
+    no result file, no process left -- on 2 ranks, so a rank-local error would hang."""
+    d = shared / "bad"
+    cases = wait_for_root(lambda: (d.mkdir(), _bad_input_cases(d))[1])
+    outcomes = run_many([(_mpirun(args), args[2]) for _, args, _ in cases], timeout=60)
+    problems = []
+    for (name, args, fragments), proc in zip(cases, outcomes):
+        err = proc["stderr"]
+        missing = [f for f in fragments if f not in err]
+        if proc["hung"] or proc["returncode"] != 2 or err.count("petgap: error:") != 1 \
+                or "Traceback" in err or missing or proc["leftovers"]:
+            problems.append(f"{name}: exit {proc['returncode']}, hung {proc['hung']}, "
+                            f"missing {missing}, left {proc['leftovers']}:\n{err[-1500:]}")
+        if name != "output-is-dir" and Path(args[4]).exists():
+            problems.append(f"{name}: {args[4]} was created")
+    assert not problems, "\n".join(problems)
+
+
+def test_existing_output_is_never_overwritten(comm, shared, reference):
+    """A finished result of the same scene, an interrupted result of another scene and a
+    file that is not a result at all are each refused (exit 2, the path and --overwrite
+    named), and left byte-identical."""
+    d = shared / "existing"
+
+    def prepare():
+        d.mkdir()
+        scene = d / "sweep.toml"
+        scene.write_text(SWEEP)
+        shutil.copy(reference["path"], d / "finished.h5")
+        shutil.copy(reference["path"], d / "other.h5")
+        with h5py.File(d / "other.h5", "r+") as f:  # another scene's interrupted run
+            f.attrs["scene"] = SWEEP.replace("seed = 3", "seed = 4")
+            f.attrs["complete"] = np.bool_(False)
+        (d / "foreign.h5").write_bytes(b"somebody else's data\n")
+        return {name: (d / f"{name}.h5").read_bytes() for name in ("finished", "other", "foreign")}
+    before = wait_for_root(prepare)
+    outcomes = run_many([(_mpirun(["petgap", "run", d / "sweep.toml", "-o", d / f"{name}.h5"]),
+                          d / f"{name}.h5") for name in before], timeout=60)
+    after = wait_for_root(lambda: {name: (d / f"{name}.h5").read_bytes() for name in before})
+    for name, proc in zip(before, outcomes):
+        assert not proc["hung"] and proc["returncode"] == 2, (name, proc["stderr"])
+        assert proc["stderr"].count("petgap: error:") == 1
+        assert f"{d / name}.h5" in proc["stderr"] and "--overwrite" in proc["stderr"]
+        assert proc["leftovers"] == []
+        assert after[name] == before[name], name
+
+
+def test_unwritable_output_directory(comm, shared):
+    """An output directory that cannot be written (a read-only file system here, since
+    root ignores permissions) is exit 2 with a message naming the path, before any
+    expensive work (no surface is made)."""
+    d = shared / "readonly"
+
+    def prepare():
+        d.mkdir()
+        (shared / "small.toml").write_text(SMALL)
+        if os.geteuid() != 0:
+            d.chmod(0o555)
+            return None
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(d)],
+                              capture_output=True, text=True)
+        return None if done.returncode == 0 else done.stderr.strip()
+    why = wait_for_root(prepare)
+    if why is not None:
+        pytest.skip(f"cannot make a read-only directory as root here (mount: {why})")
+    try:
+        (proc,) = run_many([(_mpirun(["petgap", "run", shared / "small.toml",
+                                      "-o", d / "r.h5"]), d / "r.h5")])
+    finally:
+        wait_for_root(lambda: subprocess.run(["umount", str(d)], capture_output=True)
+                      if os.geteuid() == 0 else d.chmod(0o755))
+    assert not proc["hung"] and proc["returncode"] == 2, proc["stderr"]
+    assert proc["stderr"].count("petgap: error:") == 1 and "Traceback" not in proc["stderr"]
+    assert f"{d / 'r.h5'}" in proc["stderr"] and "not writable" in proc["stderr"]
+    assert "making the surface" not in proc["stdout"]
+    assert proc["leftovers"] == []
+
+
+# ------------------------------------------------------- interrupted sweeps
+INTERRUPTIONS = {
+    # action: (trigger line in the progress log, steps certainly complete by then)
+    "term-mpirun": ("step 5 (adhesive)", 5),
+    "term-ranks": ("step 2 (reference)", 2),
+    "kill-rank1": ("step 4 converged", 4),
+}
+
+
+@pytest.mark.parametrize("action", list(INTERRUPTIONS))
+def test_interrupted_sweep_keeps_finished_steps_and_resumes(comm, shared, reference, action):
+    """SIGTERM to mpirun (as a user's Ctrl-C or a batch system), SIGTERM to every rank,
+    or SIGKILL of one rank, in the middle of the sweep: the job ends (non-zero, no
+    process left, the signal named when a rank died of it); the steps marked complete
+    are exactly those finished before, read back whole and equal the uninterrupted
+    run's; the same command then continues from the first unfinished step and ends
+    with the uninterrupted run's results."""
+    trigger, finished = INTERRUPTIONS[action]
+    d = _case_dir(shared, action)
+    out = d / "sweep.h5"
+    args = ["petgap", "run", d / "sweep.toml", "-o", out]
+    # Open MPI's mpirun lets its ranks run on for odls_base_sigkill_timeout = 1 s after a
+    # SIGTERM (time enough to finish this small sweep); 0 keeps the signal where the ranks
+    # were stopped.  SIGTERM to the ranks themselves acts at once.
+    env = {"OMPI_MCA_odls_base_sigkill_timeout": "0"} if action == "term-mpirun" else None
+    proc = wait_for_root(lambda: interrupt(args, d, trigger, action, token=out, env=env))
+    assert proc["triggered"], proc["stdout"][-2000:] + proc["stderr"][-2000:]
+    assert not proc["hung"] and proc["returncode"] != 0, proc["stderr"][-2000:]
+    assert proc["leftovers"] == []
+    if action == "kill-rank1":
+        assert "rank 1" in proc["stderr"] and "signal 9" in proc["stderr"]
+    elif action == "term-ranks":
+        assert "signal 15" in proc["stderr"]
+    # the ranks were stopped within milliseconds of the trigger: at most one more step
+    k = assert_prefix(read_result(out), finished, reference)
+    assert k <= finished + 1
+
+    (again,) = run_many([(_mpirun(args), out)], timeout=120)
+    assert_resumed(again, read_result(out), reference, already=k)
+
+
+# ---------------------------------------------------------------- full disk
+def _tmpfs(d, size):
+    """Mount a tmpfs of ``size`` on ``d`` (rank 0); None, or why it cannot be done."""
+    if os.geteuid() != 0:
+        return "not root"
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(d)],
+                          capture_output=True, text=True)
+    return None if done.returncode == 0 else f"mount: {done.stderr.strip()}"
+
+
+def _grow(d):
+    subprocess.run(["mount", "-o", "remount,size=16m", str(d)], check=True, capture_output=True)
+
+
+# The wrapper turns the free-space check off, so that HDF5 itself runs out of space.
+NO_CHECK = ("import sys; import petgap.io.results as h; h.FREE_SPACE_MARGIN = -2 ** 62; "
+            "import petgap.app.run as c; sys.exit(c.main(sys.argv[1:]))")
+
+
+@pytest.mark.parametrize("where", ["before-write", "inside-hdf5"])
+def test_full_disk_keeps_finished_steps_and_resumes(comm, shared, reference, where):
+    """The sweep on a small tmpfs that fills up.  before-write: petgap's free-space
+    check refuses the next step (exit 2, "not enough free space", the file and the
+    numbers named).  inside-hdf5: with the check off, HDF5's own write fails: the job
+    must still end (no hang in closing the file), name the failed write, and leave
+    the file openable -- not "truncated" -- with its finished steps.  Both: the
+    steps marked complete equal the uninterrupted run's, and after making room the
+    same command completes the run with the same results."""
+    d = _case_dir(shared, where)
+    disk = d / "disk"
+    size = FREE_SPACE_MARGIN + 300 * 1024 if where == "before-write" else 300 * 1024
+    why = wait_for_root(lambda: (disk.mkdir(), _tmpfs(disk, size))[1])
+    if why is not None:
+        pytest.skip(f"no small file system to fill: {why}")
+    out = disk / "sweep.h5"
+    args = ["petgap", "run", d / "sweep.toml", "-o", out]
+    if where == "inside-hdf5":
+        args = [sys.executable, "-c", NO_CHECK] + args[1:]
+    try:
+        (proc,) = run_many([(_mpirun(args), out)], timeout=90)
+        full = read_result(out)
+        wait_for_root(lambda: _grow(disk))
+        (again,) = run_many([(_mpirun(args), out)], timeout=120)
+        final = read_result(out)
+    finally:
+        wait_for_root(lambda: subprocess.run(["umount", str(disk)], capture_output=True))
+    assert not proc["hung"] and proc["returncode"] != 0, proc["stderr"][-2000:]
+    assert proc["leftovers"] == []
+    assert proc["stderr"].count("petgap: error:") == 1, proc["stderr"][-2000:]
+    if where == "before-write":
+        assert proc["returncode"] == 2 and "Traceback" not in proc["stderr"]
+        assert f"not enough free space to write to {out}" in proc["stderr"]
+        assert "bytes free" in proc["stderr"] and "rerun the same command" in proc["stderr"]
+    else:
+        assert f"writing {out} failed" in proc["stderr"]
+    k = assert_prefix(full, 1, reference)
+    assert_resumed(again, final, reference, already=k)

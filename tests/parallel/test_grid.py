@@ -1,0 +1,74 @@
+"""The slab decomposition and FFTW-MPI transforms against numpy.fft on awkward grids."""
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from petgap.parallel.grid import DecompositionError, Grid
+
+SHAPES = [(65, 48), (113, 76), (7, 9), (16, 5), (4, 64)]
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+def test_forward_matches_numpy(comm, shape):
+    grid = Grid(shape, size=(2.0, 3.5), comm=comm, planner="estimate")
+    glob = np.random.default_rng(7).standard_normal(shape)
+    fourier = grid.forward(grid.local_part(glob)).copy()
+    reference = np.fft.rfft2(glob).T[grid.ky_slice]
+    np.testing.assert_allclose(fourier, reference, rtol=0, atol=1e-12 * np.abs(reference).max())
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+def test_backward_inverts_forward(comm, shape):
+    grid = Grid(shape, comm=comm, planner="estimate")
+    glob = np.random.default_rng(3).standard_normal(shape)
+    grid.forward(grid.local_part(glob))
+    back = grid.backward() / grid.npoints
+    np.testing.assert_allclose(back, grid.local_part(glob), atol=1e-13)
+
+
+def test_slabs_tile_the_grid(comm):
+    grid = Grid((113, 76), comm=comm, planner="estimate")
+    rows = comm.allgather((grid.x_slice.start, grid.x_slice.stop))
+    krows = comm.allgather((grid.ky_slice.start, grid.ky_slice.stop))
+    assert rows[0][0] == 0 and rows[-1][1] == 113
+    assert krows[0][0] == 0 and krows[-1][1] == 76 // 2 + 1
+    assert all(a[1] == b[0] for a, b in zip(rows, rows[1:]))
+    assert all(a[1] == b[0] for a, b in zip(krows, krows[1:]))
+
+
+def test_wavevectors(comm):
+    grid = Grid((6, 8), size=(3.0, 4.0), comm=comm, planner="estimate")
+    np.testing.assert_allclose(grid.qx, 2 * np.pi * np.array([0, 1, 2, 3, -2, -1]) / 3.0)
+    n = np.arange(grid.ky_slice.start, grid.ky_slice.stop)
+    np.testing.assert_allclose(grid.qy, 2 * np.pi * n / 4.0)
+    weights = np.where((n == 0) | (n == 4), 1, 2)
+    np.testing.assert_array_equal(grid.hermitian_weight, weights)
+    # Parseval through the Hermitian weights
+    glob = np.random.default_rng(0).standard_normal((6, 8))
+    f = grid.forward(grid.local_part(glob))
+    assert np.isclose(grid.fourier_sum(np.abs(f) ** 2) / grid.npoints, np.sum(glob ** 2))
+
+
+def test_undecomposable_grid_raises_on_every_rank(comm):
+    too_few = comm.size + 1 if comm.size == 1 else 1  # 1 row cannot feed 2 ranks
+    if comm.size == 1:
+        pytest.skip("any grid decomposes on one rank")
+    with pytest.raises(DecompositionError, match="cannot be split over"):
+        Grid((too_few, 16), comm=comm, planner="estimate")
+    with pytest.raises(DecompositionError, match="Fourier rows"):
+        Grid((16, 1), comm=comm, planner="estimate")
+
+
+def test_bad_shapes(comm):
+    with pytest.raises(ValueError, match="positive"):
+        Grid((0, 4), comm=comm)
+    with pytest.raises(ValueError, match="two integers"):
+        Grid((4.5, 4), comm=comm)
+    with pytest.raises(ValueError, match="size must be positive"):
+        Grid((4, 4), size=(1.0, -1.0), comm=comm)
+
+
+def test_serial_grid_on_comm_self(comm):
+    """A COMM_SELF grid is a complete serial reference inside an MPI job."""
+    grid = Grid((9, 10), comm=MPI.COMM_SELF, planner="estimate")
+    assert grid.local_shape == (9, 10) and grid.fourier_local_shape == (6, 9)

@@ -1,0 +1,116 @@
+"""The coarse-grid start of the pressure solver (petgap.solvers.coarse).
+
+Restriction and prolongation are checked against NumPy on the gathered global
+array, on grids whose blocks of rows straddle two ranks' slabs (so the row
+exchange between the two decompositions is exercised under ``mpirun -n 2``);
+the coarse start must reach the state the uniform start reaches, in fewer
+iterations, and the same state on one rank as on two.
+"""
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from petgap.solvers.coarse import coarse_problem, coarsening_factor, prolong, restrict
+from petgap.mechanics.problem import ContactProblem, Load, MeanGap
+from petgap.mechanics.half_space import ElasticHalfSpace
+from petgap.parallel.grid import Grid
+from petgap.solvers.pressure_cg import polonsky_keer
+from petgap.surfaces.self_affine import self_affine
+from test_contact import (E_STAR, assert_same_state, max_abs, solve_on_three_ranks,
+                          tolerance_scales)
+
+
+def make_grid(shape, comm, size=None):
+    return Grid(shape, size=size, comm=comm, planner="estimate")
+
+
+def test_coarsening_depends_on_the_shape_alone():
+    assert coarsening_factor((1024, 1024)) == 4
+    assert coarsening_factor((128, 128)) == 4          # 32 x 32 coarse
+    assert coarsening_factor((130, 64)) == 2           # 130 is not a multiple of 4
+    assert coarsening_factor((96, 64)) == 2            # 64 / 4 < 32
+    assert coarsening_factor((75, 50)) is None
+    assert coarsening_factor((512, 4)) is None
+
+
+@pytest.mark.parametrize("shape, f", [((36, 16), 4), ((130, 64), 2)])
+def test_restriction_and_prolongation_match_numpy(comm, shape, f):
+    """Block means and block repeats, whatever the two decompositions.
+
+    (36, 16) on 2 ranks: fine rows 18 + 18, coarse rows 5 + 4, so coarse row 4
+    takes fine rows 16-19 from both ranks; (130, 64): 65 + 65 and 33 + 32.
+    """
+    grid = make_grid(shape, comm, size=(2.0, 1.0))
+    coarse = make_grid((shape[0] // f, shape[1] // f), comm, size=(2.0, 1.0))
+    rng = np.random.default_rng(7)
+    full = rng.standard_normal(shape)
+    means = restrict(grid, coarse, grid.local_part(full).copy(), f)
+    expected = full.reshape(shape[0] // f, f, shape[1] // f, f).mean(axis=(1, 3))
+    coarse_field = rng.standard_normal(coarse.shape)
+    fine = prolong(coarse, grid, coarse.local_part(coarse_field).copy(), f)
+    repeated = np.repeat(np.repeat(coarse_field, f, axis=0), f, axis=1)
+    # judged over all ranks, so that every rank fails together
+    assert max_abs(coarse, means - coarse.local_part(expected)) <= 1e-14
+    assert max_abs(grid, fine - grid.local_part(repeated)) == 0.0
+
+
+def _rough(grid, seed=2):
+    h = self_affine(grid, 0.8, 8 * grid.dx, 0.5 * grid.Lx, rms_slope=0.1, seed=seed)
+    return ContactProblem(grid, h, ElasticHalfSpace(grid, E_STAR))
+
+
+@pytest.mark.parametrize("control", ["load", "mean-gap"])
+def test_coarse_start_reaches_the_uniform_start_state_sooner(comm, control):
+    grid = make_grid((256, 256), comm)
+    problem = _rough(grid)
+    ctrl = Load(0.02 * problem.pressure_scale) if control == "load" \
+        else MeanGap(0.8 * problem.rms_height)
+    tol = 1e-9
+    coarse = polonsky_keer(problem, ctrl, tolerance=tol)
+    plain = polonsky_keer(problem, ctrl, tolerance=tol, coarse_start=False)
+    assert coarse.converged and plain.converged
+    assert coarse.start.startswith("coarse 64x64:") and "32x32" in coarse.start
+    assert plain.start in ("uniform pressure", "overlap of the undeformed surfaces")
+    assert coarse.iterations < plain.iterations
+    assert_same_state(grid, coarse, plain, *tolerance_scales(problem, tol))
+    assert coarse_problem(problem).grid.shape == (64, 64)
+    assert coarse_problem(problem) is coarse_problem(problem)  # made once
+
+
+@pytest.mark.parametrize("control", ["load", "mean-gap"])
+def test_coarse_start_on_two_ranks_equals_one(comm, control):
+    """Straddling blocks (130 rows: fine 65 + 65, coarse 33 + 32) sum in another order only."""
+    shape, size = (130, 64), (2.03125, 1.0)
+    serial = make_grid(shape, MPI.COMM_SELF, size=size)
+    h = self_affine(serial, 0.8, 8 * serial.dx, 0.5, rms_slope=0.1, seed=3)
+    grid = make_grid(shape, comm, size=size)
+    one_problem = ContactProblem(serial, h, ElasticHalfSpace(serial, E_STAR))
+    many_problem = ContactProblem(grid, grid.local_part(h).copy(), ElasticHalfSpace(grid, E_STAR))
+    ctrl = Load(0.02 * one_problem.pressure_scale) if control == "load" \
+        else MeanGap(0.8 * one_problem.rms_height)
+    one = polonsky_keer(one_problem, ctrl, tolerance=1e-10)
+    many = polonsky_keer(many_problem, ctrl, tolerance=1e-10)
+    assert one.converged and many.converged and one.start.startswith("coarse 65x32")
+    assert many.iterations == one.iterations and many.start == one.start
+    h0, ps = one_problem.gap_scale, one_problem.pressure_scale
+    assert max_abs(grid, many.gap - one.gap[grid.x_slice]) <= 1e-12 * h0
+    assert max_abs(grid, many.pressure - one.pressure[grid.x_slice]) <= 1e-12 * ps
+    assert many.contact_fraction == one.contact_fraction
+
+
+def test_coarse_start_on_three_ranks_equals_one(comm, mpi_tmp_path, run_cli):
+    """134 rows on 3 ranks: fine 45 + 45 + 44, coarse 23 + 23 + 21: coarse row 22 sums fine
+    rows of two ranks, and the two grids' slabs are cut at different rows."""
+    shape, size = (134, 64), (2.09375, 1.0)
+    serial = make_grid(shape, MPI.COMM_SELF, size=size)
+    h = self_affine(serial, 0.8, 8 * serial.dx, 0.5, rms_slope=0.1, seed=6)
+    three = solve_on_three_ranks(comm, mpi_tmp_path, run_cli, h, size, solver="polonsky_keer")
+    problem = ContactProblem(serial, h, ElasticHalfSpace(serial, E_STAR))
+    controls = [Load(0.02 * problem.pressure_scale), MeanGap(0.8 * problem.rms_height)]
+    for (gap, pressure, scalars), control in zip(three, controls):
+        one = polonsky_keer(problem, control, tolerance=1e-10)
+        assert scalars["ranks"] == 3 and scalars["converged"] and one.converged
+        assert one.start.startswith("coarse 67x32")
+        assert scalars["iterations"] == one.iterations and scalars["start"] == one.start
+        assert np.abs(gap - one.gap).max() <= 1e-12 * problem.gap_scale
+        assert np.abs(pressure - one.pressure).max() <= 1e-12 * problem.pressure_scale
