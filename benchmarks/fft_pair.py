@@ -36,8 +36,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from floor import fft_floor_command
+
 ROOT = Path(__file__).resolve().parents[1]
-FFT_LIMIT = ROOT.parent / "shared" / "bench" / "fft_limit"
 
 
 def worker(n, repeats, warmup):
@@ -100,7 +101,7 @@ def _run(cmd, what, env=None, attempts=2, keys=("median_pair_s",)):
 
 
 def run_fft_limit(n, ranks, repeats):
-    return _run([str(FFT_LIMIT), str(n), str(ranks), str(repeats)], "fft_limit")
+    return _run(fft_floor_command(n, ranks, repeats), "fft_floor")
 
 
 def run_petgap(n, ranks, repeats, warmup, wisdom="cached"):

@@ -22,6 +22,7 @@ KKT conditions: ``p + v'(g) = 0`` where ``g > 0`` and ``p + v'(0) >= 0`` where
 (:meth:`ContactProblem.kkt_residuals`): the largest violation in pressure
 relative to ``h0' E*`` and the largest violation in gap relative to ``h0``.
 """
+import copy
 import time
 from dataclasses import dataclass, field
 
@@ -29,6 +30,7 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.parallel._fftw_mpi import weighted_power
+from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.interactions import HardWall
 
 
@@ -134,15 +136,25 @@ class ContactProblem:
     grid : petgap.parallel.grid.Grid
     topography : ndarray, shape ``grid.local_shape``
         This rank's slab of the rigid surface heights ``h``.
-    half_space : petgap.mechanics.half_space.ElasticHalfSpace
+    half_space : petgap.mechanics.half_space.ElasticHalfSpace, optional
+        The elastic body; made from ``contact_modulus`` when not given.
     interaction : HardWall or ExponentialAdhesion, optional
         Default: hard wall only.
+    contact_modulus : float, optional
+        ``E*`` of the half-space to make when ``half_space`` is not given
+        (default 1); must not be given with ``half_space``.
     """
 
-    def __init__(self, grid, topography, half_space, interaction=None):
+    def __init__(self, grid, topography, half_space=None, interaction=None, *,
+                 contact_modulus=None):
         if topography.shape != grid.local_shape:
             raise ValueError(f"topography slab has shape {topography.shape}, "
                              f"grid expects {grid.local_shape}")
+        if half_space is None:
+            half_space = ElasticHalfSpace(grid, 1.0 if contact_modulus is None
+                                          else contact_modulus)
+        elif contact_modulus is not None:
+            raise ValueError("give either half_space or contact_modulus, not both")
         self.grid = grid
         self.half_space = half_space
         self.interaction = interaction or HardWall()
@@ -165,23 +177,36 @@ class ContactProblem:
         self.pressure_scale = self.rms_slope * half_space.contact_modulus
         #: Gap scale of the KKT residual, ``h0``.
         self.gap_scale = self.rms_height
-        self.operator_applications = 0
-        #: The block-averaged problem of :func:`petgap.solvers.coarse.coarse_problem`,
-        #: made on first use and kept for the steps of a sweep (False: not yet
-        #: looked for; None: this grid is not coarsened).
-        self._coarse = False
+        #: What solvers derive from this problem and keep for the steps of a
+        #: sweep (e.g. the coarse-grid problem of :mod:`petgap.solvers.coarse`).
+        self.solver_cache = {}
+
+    @property
+    def operator_applications(self):
+        """Applications of ``K`` or ``K^{-1}`` so far (counted by the half-space)."""
+        return self.half_space.applications
+
+    def with_interaction(self, interaction):
+        """The same problem (grid, topography, half-space) with another interaction.
+
+        Shares every array and the half-space, so operator applications of
+        either count for both; what solvers cached is not shared (it depends on
+        the interaction).
+        """
+        other = copy.copy(self)
+        other.interaction = interaction
+        other.solver_cache = {}
+        return other
 
     # ------------------------------------------------------------ operators
     def elastic_pressure(self, gap, out=None):
         """Zero-mean elastic pressure ``K (g + h)`` (one transform pair)."""
-        self.operator_applications += 1
         buf = self.grid.real
         np.add(gap, self.topography, out=buf)
-        return self.half_space._apply(buf, self.half_space._stiffness, 1, out)
+        return self.half_space.pressure(buf, out)
 
     def displacement(self, pressure, out=None):
         """Zero-mean displacement ``K^{-1} p`` (one transform pair)."""
-        self.operator_applications += 1
         return self.half_space.displacement(pressure, out)
 
     def objective_gradient(self, gap, gradient, mean_pressure):

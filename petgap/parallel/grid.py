@@ -93,9 +93,11 @@ class Grid:
         # FFT buffers: the padded real slab and the transposed Fourier slab.
         self._real_storage = _aligned_empty(2 * alloc, np.float64)
         self._fourier_storage = _aligned_empty(alloc, np.complex128)
-        self._padded = self._real_storage[:ln0 * 2 * self.nky].reshape(ln0, 2 * self.nky)
+        #: Real-space FFT buffer with its r2c padding columns, ``(nx_local, 2 nky)``:
+        #: kernels that fill the buffer in a fused pass write rows of this width.
+        self.padded = self._real_storage[:ln0 * 2 * self.nky].reshape(ln0, 2 * self.nky)
         #: Real-space FFT buffer, ``(nx_local, ny)`` view of the padded slab.
-        self.real = self._padded[:, :ny]
+        self.real = self.padded[:, :ny]
         #: Fourier-space FFT buffer, ``(nky_local, nx)``.
         self.fourier = self._fourier_storage[:ln1 * nx].reshape(ln1, nx)
 
@@ -208,7 +210,7 @@ class Grid:
         For fields a solver keeps in the padded layout so that transforms can
         write them directly (``out`` of :meth:`convolve_qpower_sparse`).
         """
-        padded = self._padded
+        padded = self.padded
         array = _aligned_empty(padded.size, np.float64).reshape(padded.shape)
         array[...] = 0.0
         return array

@@ -35,7 +35,6 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.mechanics.problem import ContactProblem
-from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.parallel.grid import DecompositionError, Grid
 
 #: Smallest side of a coarse grid, in points (below it the uniform start is cheap).
@@ -61,11 +60,11 @@ def coarsening_factor(shape):
 def coarse_problem(problem):
     """The block-averaged problem on the coarse grid, made once and kept; None if none.
 
-    Collective.  Kept on ``problem`` (``ContactProblem._coarse``) so that the
-    steps of a sweep share it; about ``1/f^2`` of the fine problem's memory.
+    Collective.  Kept in ``problem.solver_cache`` so that the steps of a sweep
+    share it; about ``1/f^2`` of the fine problem's memory.
     """
-    if problem._coarse is not False:
-        return problem._coarse
+    if "coarse" in problem.solver_cache:
+        return problem.solver_cache["coarse"]
     grid = problem.grid
     f = coarsening_factor(grid.shape)
     coarse = None
@@ -77,9 +76,9 @@ def coarse_problem(problem):
             cgrid = None  # too few coarse rows for this many ranks: no coarse start
         if cgrid is not None:
             h = restrict(grid, cgrid, problem.topography, f)
-            coarse = ContactProblem(cgrid, h, ElasticHalfSpace(
-                cgrid, problem.half_space.contact_modulus), problem.interaction)
-    problem._coarse = coarse
+            coarse = ContactProblem(cgrid, h, interaction=problem.interaction,
+                                    contact_modulus=problem.half_space.contact_modulus)
+    problem.solver_cache["coarse"] = coarse
     return coarse
 
 
@@ -141,27 +140,3 @@ def _move_rows(comm, block, first, lo, hi):
                    [received, (recv_counts, recv_offsets), MPI.DOUBLE])
     return [(start, received[offset:offset + rows * width].reshape(rows, width))
             for (start, rows), offset in zip(pieces, recv_offsets) if rows]
-
-
-def coarse_start(problem, control, tolerance, max_iterations):
-    """The fine-grid pressure to start from, and a line saying how it was found.
-
-    Returns ``(None, "")`` when the grid is not coarsened (the caller's own
-    cold start applies) or the coarse solve produced NaN.  Collective.
-    """
-    from petgap.solvers.pressure_cg import polonsky_keer  # which imports this module
-
-    coarse = coarse_problem(problem)
-    if coarse is None:
-        return None, ""
-    solution = polonsky_keer(coarse, control, tolerance=max(tolerance, COARSE_TOLERANCE),
-                             max_iterations=max_iterations)
-    pressure = solution.pressure
-    finite = problem.grid.comm.allreduce(bool(np.isfinite(pressure).all()), op=MPI.LAND)
-    description = (f"coarse {coarse.grid.nx}x{coarse.grid.ny}: {solution.iterations} "
-                   f"iterations, {solution.reason}"
-                   + (f"; {solution.start}" if solution.start.startswith("coarse") else ""))
-    if not finite:
-        return None, description + " (NaN: not used)"
-    factor = problem.grid.nx // coarse.grid.nx
-    return prolong(coarse.grid, problem.grid, pressure, factor), description

@@ -40,6 +40,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from petgap.mechanics.interactions import HardWall
 from petgap.mechanics.problem import Load, MeanGap, Timer
 from petgap.solvers.gap_cg import gap_cg
 from petgap.solvers.pressure_cg import polonsky_keer, touching_state
@@ -533,7 +534,6 @@ def _solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial
     separated state is returned with ``converged=False``.  Full contact
     (``g_bar = 0``) carries every load that leaves no wall reaction tensile.
     """
-    from petgap.mechanics.problem import ContactProblem
     timer = Timer()
     target = float(control.mean_pressure)
     h0 = problem.gap_scale
@@ -542,13 +542,9 @@ def _solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial
     if initial is not None:
         gap_guess, state = initial.mean_gap, initial
     else:
-        hard = ContactProblem.__new__(ContactProblem)
-        hard.__dict__.update(problem.__dict__)
-        from petgap.mechanics.interactions import HardWall
-        hard.interaction = HardWall()
-        seed = polonsky_keer(hard, Load(max(target, 1e-3 * problem.pressure_scale)),
+        seed = polonsky_keer(problem.with_interaction(HardWall()),
+                             Load(max(target, 1e-3 * problem.pressure_scale)),
                              tolerance=max(tolerance, 1e-6), max_iterations=max_iterations)
-        problem.operator_applications = hard.operator_applications
         iterations += seed.iterations
         gap_guess, state = seed.mean_gap, seed
     points, history = [], []
@@ -653,7 +649,6 @@ class GapHessian:
         problem = self.problem
         v = xv.getArray(readonly=True).reshape(self.shape)
         y = yv.getArray().reshape(self.shape)
-        problem.operator_applications += 1
         problem.half_space.pressure(v, out=y)
         if self.curvature is not None:
             y += self.curvature * v

@@ -65,16 +65,11 @@ zero by construction: ``p >= 0`` and ``p = 0`` off ``S``).
 import numpy as np
 from mpi4py import MPI
 
+from petgap.parallel.collective import global_sums
 from petgap.solvers import _contact_set as _cs
 from petgap.solvers import coarse
 from petgap.mechanics.problem import Load, MeanGap, Timer, judge
 from petgap.solvers.contact_set import INDEX, ContactSet
-
-
-def _sums(comm, *values):
-    buf = np.array(values, dtype=float)
-    comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
-    return buf
 
 
 def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
@@ -131,7 +126,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
 
     start = "warm" if initial_pressure is not None else ""
     if initial_pressure is None and coarse_start:
-        initial_pressure, start = coarse.coarse_start(problem, control, tolerance,
+        initial_pressure, start = _coarse_start(problem, control, tolerance,
                                                       max_iterations)
     start_time = timer()
     if initial_pressure is None:
@@ -141,7 +136,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     # The contact set S = {p > 0} as sorted index lists, with p and the
     # conjugate direction t stored on S only (see petgap/contact_set.py).
     mask = np.zeros(grid.local_shape, dtype=np.uint8)
-    padded = grid._padded
+    padded = grid.padded
     padded_width = padded.shape[1]
     offset = problem.mean_height + target if not load else 0.0
     if initial_pressure is not None or not load:
@@ -155,7 +150,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         contact = ContactSet.from_pressure(mask, padded_width, p)
         del p
         if load:
-            total = _sums(comm, contact.p.sum())[0]
+            total = global_sums(comm, contact.p.sum())[0]
             if total > 0:
                 contact.p[...] *= target * n / total
             else:
@@ -203,11 +198,10 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                 pS *= scale
                 scale = 1.0
             half_space.apply_sparse(pidx, pS, inverse=True, out=u)
-            problem.operator_applications += 1
             since_fresh = 0
         else:
             since_fresh += 1
-        n_contact, sum_g = _sums(comm, len(idx), _cs.gather_gap(u, pidx, h, idx, offset, gS))
+        n_contact, sum_g = global_sums(comm, len(idx), _cs.gather_gap(u, pidx, h, idx, offset, gS))
         shift = sum_g / n_contact if (load and n_contact > 0) else 0.0
         in_max, g_norm = _cs.shift_and_norms(gS, shift)
         pen_max, n_over = _cs.gap_pass(u, h, mask, offset - shift, overlap)
@@ -235,7 +229,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             extra = -g.ravel()[points] * (problem.pressure_scale / problem.gap_scale)
             del g, idx, pidx, pS, tS, gS
             contact.merge(points, extra)
-            scale = target * n / _sums(comm, contact.p.sum())[0] if load else 1.0
+            scale = target * n / global_sums(comm, contact.p.sum())[0] if load else 1.0
             delta, fresh = 0.0, True
             continue
         if preconditioned:
@@ -243,8 +237,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # under load control
             zS = contact.z
             half_space.apply_sparse(pidx, gS, inverse=False, gathered=zS)
-            problem.operator_applications += 1
-            sum_z, gz, g_sq = _sums(comm, *_cs.z_sums(zS, gS), g_norm)
+            sum_z, gz, g_sq = global_sums(comm, *_cs.z_sums(zS, gS), g_norm)
             zshift = sum_z / n_contact if load else 0.0
             # Pressure per unit penetration given to entering points (below):
             # plain Polonsky-Keer steps along the gap, so its step length tau
@@ -256,15 +249,14 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             g_norm = gz
             _cs.direction(zS, zshift, delta * g_norm / g_old, tS)
         else:
-            g_norm = _sums(comm, g_norm)[0]
+            g_norm = global_sums(comm, g_norm)[0]
             stiffness = 1.0
             _cs.direction(gS, 0.0, delta * g_norm / g_old, tS)
         g_old = g_norm
         # The image r = K^{-1} t of the direction: one transform pair, from S
         # to the whole slab (the recurrence below needs r everywhere)
         half_space.apply_sparse(pidx, tS, inverse=True)
-        problem.operator_applications += 1
-        sum_r, sum_gt, sum_rt, sum_t = _sums(comm, *_cs.step_sums(padded, pidx, gS, tS))
+        sum_r, sum_gt, sum_rt, sum_t = global_sums(comm, *_cs.step_sums(padded, pidx, gS, tS))
         if load:
             sum_rt -= sum_r / n_contact * sum_t  # r minus its mean over S
         if not sum_rt > 0:
@@ -275,7 +267,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         added = overlap[:min(n_over, len(overlap))]
         added_p = np.empty(len(added))
         sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau * stiffness, added_p)
-        n_overlap, n_clipped, sum_p = _sums(comm, entering + len(added), clipped, sum_p)
+        n_overlap, n_clipped, sum_p = global_sums(comm, entering + len(added), clipped, sum_p)
         delta = 0.0 if n_overlap > 0 else 1.0
         scale = target * n / sum_p if load else 1.0
         if clipped or len(added):
@@ -310,6 +302,28 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         start=start, start_time=start_time)
 
 
+def _coarse_start(problem, control, tolerance, max_iterations):
+    """The fine-grid pressure to start from, and a line saying how it was found.
+
+    Returns ``(None, "")`` when the grid is not coarsened (the caller's own
+    cold start applies) or the coarse solve produced NaN.  Collective.
+    """
+    small = coarse.coarse_problem(problem)
+    if small is None:
+        return None, ""
+    solution = polonsky_keer(small, control, tolerance=max(tolerance, coarse.COARSE_TOLERANCE),
+                             max_iterations=max_iterations)
+    pressure = solution.pressure
+    finite = problem.grid.comm.allreduce(bool(np.isfinite(pressure).all()), op=MPI.LAND)
+    description = (f"coarse {small.grid.nx}x{small.grid.ny}: {solution.iterations} "
+                   f"iterations, {solution.reason}"
+                   + (f"; {solution.start}" if solution.start.startswith("coarse") else ""))
+    if not finite:
+        return None, description + " (NaN: not used)"
+    factor = problem.grid.nx // small.grid.nx
+    return coarse.prolong(small.grid, problem.grid, pressure, factor), description
+
+
 def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, max_iterations,
                              monitor):
     """Iteration 0 of a load-controlled cold start from the uniform pressure, in closed form.
@@ -331,10 +345,10 @@ def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, 
     allowed): then the caller runs it the general way.
     """
     grid, comm, h = problem.grid, problem.grid.comm, problem.topography
-    padded = grid._padded
+    padded = grid.padded
     hbar = problem.mean_height
     g_max, g_sq = _cs.uniform_gap(padded, h, hbar)
-    g_sq = _sums(comm, g_sq)[0]
+    g_sq = global_sums(comm, g_sq)[0]
     if not np.isfinite(g_sq):  # decided alike on every rank (a NaN sum is NaN everywhere)
         return None
     residual = comm.allreduce(g_max, op=MPI.MAX) / problem.gap_scale
@@ -343,11 +357,10 @@ def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, 
     if monitor is not None:
         monitor(0, residual)
     problem.half_space.apply_in_buffer(inverse=False)   # z = K g
-    problem.operator_applications += 1
-    sum_z, gz = _sums(comm, *_cs.uniform_sums(padded, h, hbar))
+    sum_z, gz = global_sums(comm, *_cs.uniform_sums(padded, h, hbar))
     zshift = sum_z / grid.npoints
     entry = gz / g_sq  # tau (= 1) times the stiffness's Rayleigh quotient on g
-    n_overlap, _, sum_p = _sums(comm, *_cs.uniform_step(padded, h, hbar, zshift, target,
+    n_overlap, _, sum_p = global_sums(comm, *_cs.uniform_step(padded, h, hbar, zshift, target,
                                                         entry, p))
     # Only shrinking is expected from here: no spare capacity.
     contact = ContactSet.from_pressure(mask, padded_width, p, spare=1.0)
