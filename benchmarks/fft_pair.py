@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
-"""petgap's FFT transform pair against the FFTW-MPI floor (GUIDE section 2).
+"""petgap's FFT transform pair against the FFTW-MPI floor (docs/benchmarks.md).
 
 For each grid size N and rank count P this alternates, round by round, two
 measurements of one forward (r2c) plus one backward (c2r) 2D transform of an
 N x N field:
 
-* ``../shared/bench/fft_limit N P`` (C, FFTW-MPI, FFTW_MEASURE, transposed
-  layout; median of 15 pairs), and
+* ``fft_limit N P`` (a C program outside the repository, at ``FFT_LIMIT``;
+  FFTW-MPI, FFTW_MEASURE, transposed layout; median of 15 pairs), and
 * petgap's own pair: ``Grid((N, N), planner="measure")``, ``grid.forward()`` then
   ``grid.backward()`` on the grid's own buffers, timed exactly as fft_limit.c
   does (barrier, MPI_Wtime, pair, barrier), median of ``--repeats`` pairs after

@@ -12,7 +12,7 @@ Usage::
     mpirun -n P python benchmarks/surface_memory.py [--n 4096] [--planner estimate]
 
 Prints one table on rank 0.  The surface is H = 0.8, lambda_min = 32 pixels,
-lambda_max = n / 2 (GUIDE section 3).
+lambda_max = n / 2 (the surface of docs/benchmarks.md).
 """
 import argparse
 import resource

@@ -113,7 +113,7 @@ def crossing_fraction(p_in, g_out, spacing, contact_modulus, cosine=1.0, p_out=N
         t = K c^2 (1 - t)^3,    K = (4 p_in d / (3 E* g_out))^2,
 
     one root in ``[0, 1]`` (with ``u = 1 - t``: ``K c^2 u^3 + u - 1 = 0``).  This is
-    the brief's ``alpha y^3 + beta y = d`` with ``y = A^(-2/3)``, solved for the
+    the cubic ``alpha y^3 + beta y = d`` in ``y = A^(-2/3)``, solved for the
     fraction instead, which stays well conditioned for any ratio of ``p_in`` to
     ``g_out`` (no cube roots of differences of large numbers, as in Cardano).
 

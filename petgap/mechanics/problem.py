@@ -1,7 +1,7 @@
 """The contact problem: a rigid rough surface against a periodic elastic half-space.
 
-Formulation (GUIDE section 4)
------------------------------
+Formulation (docs/conventions.md)
+---------------------------------
 The gap is ``g(x) = d + u(x) - h(x) >= 0`` with ``h`` the rigid topography,
 ``u`` the elastic displacement (positive away from the rigid surface) and ``d``
 the rigid-body separation.  Since the half-space operator only sees the
@@ -291,7 +291,7 @@ class ContactProblem:
         n = grid.npoints
         area = grid.pixel_area
         mean_gap, mean_pressure, c = total[0] / n, total[1] / n, total[2] / n
-        # Force split (GUIDE section 4; paper Eq. 1 and 15): F = A0 P0 = F_rep + F_att
+        # Force split (paper Eqs. 1 and 15): F = A0 P0 = F_rep + F_att
         # with F_att = -sum dx dy v'(g) (< 0, attractive) and F_rep the wall reaction.
         repulsive_force, attractive_force = area * total[4], -area * total[5]
         a_rep = c * grid.area

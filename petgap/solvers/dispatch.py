@@ -404,15 +404,15 @@ def _solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance, max_ite
 
     Inexact: each inner load-control solve is only as accurate as the step it
     serves (:func:`_inner_tolerance`).  A fixed inner tolerance of
-    ``tolerance / 100`` spent the whole iteration budget of a step on its first
-    inner solve, at a guessed ``P0`` that the secant would have replaced: TAO's
-    line searches compare energies, whose round-off hides the decrease of a
-    step once the KKT residual is below about ``1e-9`` at 128^2, so ``1e-10``
-    was out of reach (BLMVM, ``g_bar = h0``, tolerance 1e-8: 3000 iterations,
-    the best residual 3e-10, without leaving ``P0 = 0.01 h0' E*``; now 5 outer
-    steps and about 1000 iterations).  Every constant here is in the problem's
-    scales (``h0``, ``h0' E*``), so the iterations are the same in every unit
-    system.
+    ``tolerance / 100`` would spend the whole iteration budget of a step on its
+    first inner solve, at a guessed ``P0`` that the secant would have replaced:
+    TAO's line searches compare energies, whose round-off hides the decrease of
+    a step once the KKT residual is below about ``1e-9`` at 128^2, so ``1e-10``
+    is out of reach (BLMVM, ``g_bar = h0``, tolerance 1e-8: 3000 iterations,
+    the best residual 3e-10, without leaving ``P0 = 0.01 h0' E*``; with the
+    adaptive inner tolerance, 5 outer steps and about 1000 iterations).  Every
+    constant here is in the problem's scales (``h0``, ``h0' E*``), so the
+    iterations are the same in every unit system.
     """
     timer = Timer()
     target = float(control.mean_gap)

@@ -3,7 +3,7 @@
 A surface is never assembled on one rank: it is drawn, filtered and rescaled on
 each rank's own rows of the transposed Fourier half plane, and transformed to
 the real-space slab with the :class:`~petgap.parallel.grid.Grid`'s FFTW-MPI plans.  That is
-what lets a 65536^2 surface (paper section 7) be generated at all; serial
+what lets a 65536^2 surface (the paper's largest) be generated at all; serial
 generators run out of memory far below that.
 
 Conventions
@@ -23,7 +23,7 @@ Conventions
   is rescaled to a target rms slope or rms height instead, because that is the
   quantity the contact results are expressed in.
 * The ``q = 0`` coefficient is zero: generated surfaces have mean height zero.
-* Statistics are spectral (GUIDE section 4): ``h0 = rms(h - mean)``,
+* Statistics are spectral (docs/conventions.md): ``h0 = rms(h - mean)``,
   ``h0' = sqrt(<|grad h|^2>) = sqrt(sum_q |q|^2 |h_q|^2) / N``,
   ``h0'' = rms(laplacian h) / 2 = sqrt(sum_q |q|^4 |h_q|^2) / (2 N)``; sums run over
   the full plane (half-plane rows weighted by ``grid.hermitian_weight``).  For

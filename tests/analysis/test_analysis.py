@@ -91,7 +91,7 @@ def test_crossing_fraction_is_exact_for_the_edge_asymptotics():
     assert analysis.crossing_fraction(1.0, 1e-300, 1.0, 1.0) == pytest.approx(1.0)
     # zero gap under tension: the zero of the linearly interpolated pressure
     assert analysis.crossing_fraction(3.0, 0.0, 1.0, 1.0, p_out=-1.0) == pytest.approx(0.75)
-    # the brief's form alpha y^3 + beta y = d with y = A^(-2/3) gives the same point
+    # the cubic alpha y^3 + beta y = d in y = A^(-2/3) gives the same point
     p_in, g_out, d = 0.7, 0.02, 1.0
     alpha, beta = p_in ** 2, (3 * E_STAR * g_out / 4) ** (2 / 3)
     y = np.roots([alpha, 0.0, beta, -d])
