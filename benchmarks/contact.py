@@ -9,7 +9,7 @@ to .npy, and solved
 * by petgap under ``mpirun -n R`` (load P0 = 0.002 E*, tolerance 1e-8 on the
   unit-free KKT residual), reporting iterations, operator applications (FFT
   pairs) per iteration, seconds per iteration, the FFT-pair floor
-  (``fft_limit``, a C program outside the repository, at ``FFT_LIMIT``)
+  (``benchmarks/fft_floor.c``, built on first use by ``benchmarks/floor.py``)
   measured in the same run, and peak memory per grid point (peak RSS minus
   the RSS before the grid exists, summed over ranks).
   "evaluation / floor" is the cost of one operator application in the

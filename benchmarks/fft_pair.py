@@ -5,10 +5,11 @@ For each grid size N and rank count P this alternates, round by round, two
 measurements of one forward (r2c) plus one backward (c2r) 2D transform of an
 N x N field:
 
-* ``fft_limit N P`` (a C program outside the repository, at ``FFT_LIMIT``;
-  FFTW-MPI, FFTW_MEASURE, transposed layout; median of 15 pairs), and
+* ``benchmarks/fft_floor.c`` under ``mpirun -n P`` (FFTW-MPI, FFTW_MEASURE,
+  transposed layout; median of 15 pairs; built on first use by
+  ``benchmarks/floor.py``), and
 * petgap's own pair: ``Grid((N, N), planner="measure")``, ``grid.forward()`` then
-  ``grid.backward()`` on the grid's own buffers, timed exactly as fft_limit.c
+  ``grid.backward()`` on the grid's own buffers, timed exactly as fft_floor.c
   does (barrier, MPI_Wtime, pair, barrier), median of ``--repeats`` pairs after
   ``--warmup`` untimed pairs, run under ``mpirun -n P``; and, in the same
   process, one application of the elastic operator as the solvers make it
@@ -50,9 +51,9 @@ def worker(n, repeats, warmup):
     from petgap.parallel.grid import Grid
     comm = MPI.COMM_WORLD
     grid = Grid((n, n), comm=comm, planner="measure")
-    # Data as fft_limit.c's: uniform random numbers (after planning, which
+    # Data as fft_floor.c's: uniform random numbers (after planning, which
     # scribbles on the buffers).  Values grow by n^2 per unnormalised pair, as
-    # they do in fft_limit; 17 pairs stay far from overflow for n <= 8192.
+    # they do in fft_floor; 17 pairs stay far from overflow for n <= 8192.
     grid.real[...] = np.random.default_rng(comm.rank).random(grid.local_shape)
     for _ in range(warmup):
         grid.forward()
@@ -100,12 +101,12 @@ def _run(cmd, what, env=None, attempts=2, keys=("median_pair_s",)):
     raise RuntimeError(f"{what} failed {attempts} times: {shlex.join(cmd)}")
 
 
-def run_fft_limit(n, ranks, repeats):
+def run_fft_floor(n, ranks, repeats):
     return _run(fft_floor_command(n, ranks, repeats), "fft_floor")
 
 
 def run_petgap(n, ranks, repeats, warmup, wisdom="cached"):
-    """petgap's pair under mpirun; ``wisdom="fresh"`` plans from scratch, as fft_limit does."""
+    """petgap's pair under mpirun; ``wisdom="fresh"`` plans from scratch, as fft_floor does."""
     cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", sys.executable, str(Path(__file__)),
            "--worker", str(n), "--repeats", str(repeats), "--warmup", str(warmup)]
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
@@ -126,7 +127,7 @@ def main():
     parser.add_argument("--warmup", type=int, default=2, help="untimed pairs per petgap run")
     parser.add_argument("--wisdom", choices=["cached", "fresh"], default="cached",
                         help="petgap's FFTW wisdom: the on-disk cache (as petgap runs), or "
-                             "none, planning afresh each run (as fft_limit does)")
+                             "none, planning afresh each run (as fft_floor does)")
     parser.add_argument("--worker", type=int, metavar="N", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
@@ -144,13 +145,13 @@ def main():
                 order = (0, 1) if k % 2 == 0 else (1, 0)
                 for which in order:
                     if which == 0:
-                        limit.append(run_fft_limit(n, ranks, args.repeats))
+                        limit.append(run_fft_floor(n, ranks, args.repeats))
                     else:
                         pair, op = run_petgap(n, ranks, args.repeats, args.warmup,
                                               args.wisdom)
                         ours.append(pair)
                         apply.append(op)
-                print(f"# N={n} ranks={ranks} round {k}: fft_limit {limit[-1]:.4f} s, "
+                print(f"# N={n} ranks={ranks} round {k}: fft_floor {limit[-1]:.4f} s, "
                       f"petgap pair {ours[-1]:.4f} s, operator {apply[-1]:.4f} s",
                       file=sys.stderr, flush=True)
             a, b, c = (statistics.median(v) for v in (limit, ours, apply))
@@ -158,8 +159,8 @@ def main():
     print(f"# done {time.strftime('%H:%M')}, load average {os.getloadavg()[0]:.2f}",
           file=sys.stderr)
 
-    print("| N | ranks | fft_limit median s | petgap pair median s | ratio | "
-          "operator application median s | ratio | fft_limit best s | petgap pair best s |")
+    print("| N | ranks | fft_floor median s | petgap pair median s | ratio | "
+          "operator application median s | ratio | fft_floor best s | petgap pair best s |")
     print("|---|---|---|---|---|---|---|---|---|")
     for n, ranks, a, b, r, c, rc, amin, bmin in rows:
         print(f"| {n} | {ranks} | {a:.4f} | {b:.4f} | {r:.2f} | {c:.4f} | {rc:.2f} | "
