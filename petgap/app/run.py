@@ -203,7 +203,8 @@ def _run_steps(scene, grid, topography, stats, output, petsc_args, log, resume):
     from petgap.mechanics.half_space import ElasticHalfSpace
     from petgap.io.results import ResultFile, check_free_space
     from petgap.mechanics.interactions import ExponentialAdhesion, check_resolution
-    from petgap.solvers.dispatch import annotate_step, solve
+    from petgap.solvers.dispatch import solve
+    from petgap.solvers.sweep import annotate_step
 
     steps = protocol.plan(scene)
     if not steps:
@@ -288,7 +289,7 @@ def _run_steps(scene, grid, topography, stats, output, petsc_args, log, resume):
 class _SavedState:
     """A completed step read back from the file: enough to warm-start and chain.
 
-    ``zero_gap_fraction`` (what :func:`petgap.solvers.dispatch.annotate_step` compares) is
+    ``zero_gap_fraction`` (what :func:`petgap.solvers.sweep.annotate_step` compares) is
     the stored attribute, else (a file written before petgap stored it) counted
     from the stored gap, else None: the next step is then not judged for a jump.
     """
