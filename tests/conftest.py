@@ -13,11 +13,13 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import pytest
 from mpi4py import MPI
+from petsc4py import PETSc
+
+from petgap.parallel.collective import root_decides
 
 COMM = MPI.COMM_WORLD
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,11 +44,7 @@ def pytest_runtest_makereport(item, call):
 @pytest.fixture(autouse=True)
 def _petsc_garbage():
     yield
-    try:
-        from petsc4py import PETSc
-        PETSc.garbage_cleanup()
-    except ImportError:
-        pass
+    PETSc.garbage_cleanup()
 
 
 @pytest.fixture
@@ -80,19 +78,7 @@ def wait_for_root(func, comm=COMM, poll=0.02):
     A plain ``bcast`` would make Open MPI's waiting ranks spin at 100 % CPU and
     starve the subprocesses ``func`` starts on a two-core machine.
     """
-    result, error = None, None
-    if comm.rank == 0:
-        try:
-            result = func()
-        except BaseException as exc:  # handed to every rank below
-            error = exc
-    request = comm.Ibarrier()
-    while not request.Test():
-        time.sleep(poll)
-    result, error = comm.bcast((result, error), root=0)
-    if error is not None:
-        raise error
-    return result
+    return root_decides(comm, func, poll=poll)
 
 
 def clean_env(extra=None):

@@ -6,16 +6,57 @@ the direction of the step and whether it jumped to another branch, so that
 hysteresis (snap-in, pull-off) is recorded rather than averaged away.
 """
 import math
+from collections.abc import Hashable
+from dataclasses import dataclass
 
 from petgap.mechanics.problem import Load
 from petgap.solvers.dispatch import solve
 
 
-def sweep(problem, controls, **kwargs):
-    """Solve a list of controls in order, each warm-started from the previous one.
+@dataclass
+class SweepStep:
+    """One step of a :func:`sweep` in its general form.
 
-    Yields each :class:`~petgap.mechanics.problem.ContactSolution` as soon as it is done,
-    so the caller can store it before the next step starts.  Each solution gets
+    Attributes
+    ----------
+    control : Load, MeanGap or callable
+        What is imposed; a callable ``control(states)`` gets the states of the
+        steps before this one (a list, in sweep order) and returns the control,
+        for a value that only an earlier step can tell (the paper's protocol
+        imposes on each adhesive step the mean gap of its non-adhesive
+        reference step).
+    problem : petgap.mechanics.problem.ContactProblem, optional
+        The problem of this step (default: the sweep's ``problem``), so that
+        one sweep can hold hard-wall and adhesive steps.
+    chain : hashable, optional
+        Steps of one chain warm-start each other and are compared for
+        direction and jumps; steps of other chains are not.  Default: one
+        chain for the whole sweep.
+    state : object, optional
+        A state already found (a step of an interrupted run read back from
+        its file): not solved again, but annotated and, if it has a ``gap``,
+        the warm start of the next step of its chain.  It needs ``control``,
+        ``mean_gap`` and ``zero_gap_fraction`` (None allowed).
+    """
+
+    control: object = None
+    problem: object = None
+    chain: Hashable = None
+    state: object = None
+
+
+def sweep(problem, steps, *, initial=None, before=None, **solve_options):
+    """Solve steps in order, each warm-started from the previous step of its chain.
+
+    The simple form ``sweep(problem, [Load(p1), Load(p2), ...], tolerance=...)``
+    is one chain of controls on one problem.  Each item of ``steps`` may also
+    be a :class:`SweepStep` (its own problem, chain, a control computed from
+    earlier states, or a state already found), which is how ``petgap run``
+    drives a scene's steps (:mod:`petgap.app.run`).
+
+    Yields each state as soon as it is found (or, for a step given with its
+    ``state``, that state), in the order of ``steps``, so the caller can store
+    it before the next step starts.  Each state gets
 
     * ``direction``: ``"loading"`` when the control pushes the surfaces together
       (larger load, smaller mean gap) relative to the previous step,
@@ -38,14 +79,41 @@ def sweep(problem, controls, **kwargs):
       step that ends just short of pull-off sets a high rate for the next one
       to beat (``tests/solvers/test_adhesion.py`` resolves Johnson's pull-off with
       steps of 0.2, 0.1, 0.07 and 0.03 ``h_a``).
+
+    Parameters
+    ----------
+    problem : petgap.mechanics.problem.ContactProblem or None
+        The problem of every step that names none.
+    steps : iterable of Load, MeanGap, callable or SweepStep
+    initial : petgap.mechanics.problem.ContactSolution, optional
+        The state before the first step of every chain: its warm start and
+        the reference of its direction.
+    before : callable, optional
+        ``before(index, control)`` is called before each solve (not for a
+        step given with its state); a dict it returns updates the solve
+        options of that step only (e.g. its own ``monitor``).
+    **solve_options
+        Passed to :func:`petgap.solvers.dispatch.solve` for every step.
     """
-    previous = kwargs.pop("initial", None)
-    last_rate = None
-    for control in controls:
-        solution = solve(problem, control, initial=previous, **kwargs)
-        last_rate = annotate_step(solution, previous, last_rate)
-        previous = solution
-        yield solution
+    states, previous, rates = [], {}, {}
+    for index, step in enumerate(steps):
+        if not isinstance(step, SweepStep):
+            step = SweepStep(control=step)
+        chain = step.chain
+        last = previous.get(chain, initial)
+        state = step.state
+        if state is None:
+            control = step.control(states) if callable(step.control) else step.control
+            options = dict(solve_options)
+            if before is not None:
+                options.update(before(index, control) or {})
+            warm = last if getattr(last, "gap", None) is not None else None
+            state = solve(step.problem if step.problem is not None else problem, control,
+                          initial=warm, **options)
+        rates[chain] = annotate_step(state, last, rates.get(chain))
+        previous[chain] = state
+        states.append(state)
+        yield state
 
 
 def annotate_step(solution, previous, last_rate):

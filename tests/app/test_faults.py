@@ -519,7 +519,7 @@ def _grow(d):
 
 # The wrapper turns the free-space check off, so that HDF5 itself runs out of space.
 NO_CHECK = ("import sys; import petgap.io.results as h; h.FREE_SPACE_MARGIN = -2 ** 62; "
-            "import petgap.app.run as c; sys.exit(c.main(sys.argv[1:]))")
+            "import petgap.app.main as c; sys.exit(c.main(sys.argv[1:]))")
 
 
 @pytest.mark.parametrize("where", ["before-write", "inside-hdf5"])
