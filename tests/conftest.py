@@ -8,6 +8,7 @@
   while the other ranks wait without spinning, and hands every rank the result.
 * After each test PETSc's deferred garbage is collected collectively.
 """
+import contextlib
 import os
 import shutil
 import subprocess
@@ -53,15 +54,24 @@ def comm():
     return COMM
 
 
+@contextlib.contextmanager
+def shared_directory(comm=COMM, prefix="petgap-test-"):
+    """A temporary directory shared by all ranks of ``comm`` (rank 0 makes and removes it)."""
+    path = tempfile.mkdtemp(prefix=prefix) if comm.rank == 0 else None
+    path = Path(comm.bcast(path, root=0))
+    try:
+        yield path
+    finally:
+        comm.Barrier()
+        if comm.rank == 0:
+            shutil.rmtree(path, ignore_errors=True)
+
+
 @pytest.fixture
 def mpi_tmp_path():
     """A temporary directory shared by all ranks, removed afterwards."""
-    path = tempfile.mkdtemp(prefix="petgap-test-") if COMM.rank == 0 else None
-    path = Path(COMM.bcast(path, root=0))
-    yield path
-    COMM.Barrier()
-    if COMM.rank == 0:
-        shutil.rmtree(path, ignore_errors=True)
+    with shared_directory() as path:
+        yield path
 
 
 def write_shared(comm, path, text):

@@ -156,13 +156,9 @@ def figure2(legend, results, path):
         ax.loglog(s.result.x[keep], s.result.y[keep], s.marker, ms=4,
                   fillstyle="full" if s.filled else "none", label=s.label)
     _power_law_line(ax, [r.x for r in results])
-    ax.set_xlabel("$g/g_0$")
-    ax.set_ylabel(r"$p(g)\,/\,(2\pi c / 3 g_0)$")
-    ax.set_title("Gap distribution of non-contacting points (Fig. 2)", fontsize=10)
-    ax.legend(fontsize=7, title=legend.title or None, title_fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=150)
-    plt.close(fig)
+    _finish(fig, ax, path, "$g/g_0$", r"$p(g)\,/\,(2\pi c / 3 g_0)$",
+            "Gap distribution of non-contacting points (Fig. 2)", fontsize=7,
+            title=legend.title or None, title_fontsize=7)
 
 
 @dataclass
@@ -211,13 +207,9 @@ def figure3(series, path):
     _power_law_line(ax, xs)
     for text, rho in sorted(rhos.items(), key=lambda item: item[1]):
         ax.axvline(rho, color="0.5", ls=":", lw=1.2, label=f"$\\rho/g_0$ = {text}")
-    ax.set_xlabel("$g/g_0$ (non-adhesive $g_0$)")
-    ax.set_ylabel(r"$p(g)\,/\,(2\pi c / 3 g_0)$ (non-adhesive $c$, $g_0$)")
-    ax.set_title("Adhesive gap distributions (Fig. 3)", fontsize=10)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=150)
-    plt.close(fig)
+    _finish(fig, ax, path, "$g/g_0$ (non-adhesive $g_0$)",
+            r"$p(g)\,/\,(2\pi c / 3 g_0)$ (non-adhesive $c$, $g_0$)",
+            "Adhesive gap distributions (Fig. 3)", fontsize=7)
 
 
 def figure4(path):
@@ -227,10 +219,16 @@ def figure4(path):
     curves = analysis.fig4_integrand(x, FIG4_RHO_OVER_G0)
     for r, y in zip(FIG4_RHO_OVER_G0, curves):
         ax.semilogx(x, y, label=f"$\\rho/g_0$ = {r:g}")
-    ax.set_xlabel("$g/g_0$")
-    ax.set_ylabel(r"$x\,f(x)$: share of $F_{att}$ per unit $\ln(g/g_0)$")
-    ax.set_title("Integrand of Eq. 16 (Fig. 4)", fontsize=10)
-    ax.legend(fontsize=8)
+    _finish(fig, ax, path, "$g/g_0$", r"$x\,f(x)$: share of $F_{att}$ per unit $\ln(g/g_0)$",
+            "Integrand of Eq. 16 (Fig. 4)", fontsize=8)
+
+
+def _finish(fig, ax, path, xlabel, ylabel, heading, **legend):
+    """Label the axes, heading and legend of a one-panel figure, save it and free it."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(heading, fontsize=10)
+    ax.legend(**legend)
     fig.tight_layout()
     fig.savefig(path, dpi=150)
-    plt.close(fig)
+    pyplot().close(fig)

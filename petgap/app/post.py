@@ -37,9 +37,9 @@ and analysed with :mod:`petgap.analysis`; rank 0 writes into ``DIR``:
     half a decade where ``p(g)`` falls with ``g`` and the local log-log slope
     (least squares over +-0.25 decade) stays within 0.05 of its median, beyond 2
     standard errors of the bin counts; if none qualifies, the flattest
-    half-decade, with a warning.  No exponent is assumed.  A fixed range such as
-    the former default 0.01-0.1 lies above the power law at workstation sizes
-    (512^2-2048^2, ``lambda_min = 32 a0``; ``docs/fig2.md``).  Columns:
+    half-decade, with a warning.  No exponent is assumed: a fixed range such as
+    0.01-0.1 lies above the power law at workstation sizes (512^2-2048^2,
+    ``lambda_min = 32 a0``; ``docs/fig2.md``).  Columns:
     ``resolved_gap_over_g0``, ``fit_range_source`` (``auto`` or ``--fit-range``),
     ``fit_range_x_min``, ``fit_range_x_max`` (bin centres for ``auto``),
     ``fit_range_bins``, ``fit_range_qualified`` and ``fit_range_slope_deviation``
@@ -667,15 +667,22 @@ def main(argv=None):
 
 
 def _find_reference(results, item, comm):
-    """The already analysed step ``item`` refers to (its first step if none is named), or None."""
+    """The already analysed step ``item`` refers to (its first step if none is named), or None.
+
+    Rank 0 compares the resolved paths, so that every rank picks the same step.
+    """
     def same(a, b):
         try:
             return Path(a).resolve() == Path(b).resolve()
         except OSError:
             return False
-    matches = [r for r in results if same(r.row["file"], item.path)
-               and (item.step is None or r.row["step"] == item.step)]
-    return min(matches, key=lambda r: r.row["step"]) if matches else None
+
+    def decide():
+        matches = [i for i, r in enumerate(results) if same(r.row["file"], item.path)
+                   and (item.step is None or r.row["step"] == item.step)]
+        return min(matches, key=lambda i: results[i].row["step"]) if matches else None
+    index = root_decides(comm, decide)
+    return None if index is None else results[index]
 
 
 def _usable(r):

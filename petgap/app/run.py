@@ -208,8 +208,8 @@ class _SavedState:
     """A completed step read back from the file: enough to warm-start and chain.
 
     ``zero_gap_fraction`` (what :func:`petgap.solvers.sweep.annotate_step` compares) is
-    the stored attribute, else (a file written before petgap stored it) counted
-    from the stored gap, else None: the next step is then not judged for a jump.
+    the stored attribute, else (a file without it) counted from the stored
+    gap, else None: the next step is then not judged for a jump.
     """
 
     def __init__(self, gap, pressure, attrs, control, zero_gap_fraction=None):
