@@ -71,6 +71,6 @@ setup(
                           compiler_directives={"boundscheck": False, "wraparound": False,
                                                "cdivision": True, "initializedcheck": False}),
     python_requires=">=3.11",
-    entry_points={"console_scripts": ["petgap = petgap.app.run:main",
+    entry_points={"console_scripts": ["petgap = petgap.app.main:main",
                                       "petgap-post = petgap.app.post:main"]},
 )

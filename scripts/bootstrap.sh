@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Set up everything petgap needs on Debian 12, idempotently and quickly when
-# nothing is missing: Debian packages, a venv on /usr/bin/python3
+# nothing is missing: the Debian packages listed below, a venv on /usr/bin/python3
 # with system site packages (petsc4py, mpi4py, h5py-mpi come from Debian), and
 # petgap built in place with its FFTW-MPI binding.  Source it: it exports the
 # environment that mpirun and petgap need (PATH, Open MPI's run-as-root switch).

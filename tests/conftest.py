@@ -8,16 +8,19 @@
   while the other ranks wait without spinning, and hands every rank the result.
 * After each test PETSc's deferred garbage is collected collectively.
 """
+import contextlib
 import os
 import shutil
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import pytest
 from mpi4py import MPI
+from petsc4py import PETSc
+
+from petgap.parallel.collective import root_decides
 
 COMM = MPI.COMM_WORLD
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,11 +45,7 @@ def pytest_runtest_makereport(item, call):
 @pytest.fixture(autouse=True)
 def _petsc_garbage():
     yield
-    try:
-        from petsc4py import PETSc
-        PETSc.garbage_cleanup()
-    except ImportError:
-        pass
+    PETSc.garbage_cleanup()
 
 
 @pytest.fixture
@@ -55,15 +54,24 @@ def comm():
     return COMM
 
 
+@contextlib.contextmanager
+def shared_directory(comm=COMM, prefix="petgap-test-"):
+    """A temporary directory shared by all ranks of ``comm`` (rank 0 makes and removes it)."""
+    path = tempfile.mkdtemp(prefix=prefix) if comm.rank == 0 else None
+    path = Path(comm.bcast(path, root=0))
+    try:
+        yield path
+    finally:
+        comm.Barrier()
+        if comm.rank == 0:
+            shutil.rmtree(path, ignore_errors=True)
+
+
 @pytest.fixture
 def mpi_tmp_path():
     """A temporary directory shared by all ranks, removed afterwards."""
-    path = tempfile.mkdtemp(prefix="petgap-test-") if COMM.rank == 0 else None
-    path = Path(COMM.bcast(path, root=0))
-    yield path
-    COMM.Barrier()
-    if COMM.rank == 0:
-        shutil.rmtree(path, ignore_errors=True)
+    with shared_directory() as path:
+        yield path
 
 
 def write_shared(comm, path, text):
@@ -80,19 +88,7 @@ def wait_for_root(func, comm=COMM, poll=0.02):
     A plain ``bcast`` would make Open MPI's waiting ranks spin at 100 % CPU and
     starve the subprocesses ``func`` starts on a two-core machine.
     """
-    result, error = None, None
-    if comm.rank == 0:
-        try:
-            result = func()
-        except BaseException as exc:  # handed to every rank below
-            error = exc
-    request = comm.Ibarrier()
-    while not request.Test():
-        time.sleep(poll)
-    result, error = comm.bcast((result, error), root=0)
-    if error is not None:
-        raise error
-    return result
+    return root_decides(comm, func, poll=poll)
 
 
 def clean_env(extra=None):

@@ -1,1 +1,20 @@
-"""TODO"""
+"""The applications: what a user runs, on top of the library.
+
+``main``
+    The ``petgap`` command: one parser dispatching to ``run``, ``check``,
+    ``schema`` and ``study``.
+``build``
+    A scene turned into the objects that are solved (grid, surface, problems,
+    planned steps); used by every command, the benchmarks and the tests.
+``protocol``
+    The steps a scene asks for and how they chain (the paper's protocol:
+    non-adhesive reference steps, then adhesive steps at their mean gaps).
+``run``
+    ``petgap run``: the steps solved in one sweep and written to a result file.
+``study``, ``study_report``
+    ``petgap study``: the speed/accuracy trade of a scene, and its outputs.
+``post``, ``figures``, ``tables``
+    ``petgap-post``: the paper's tables and Figs. 2-4 from result files.
+``argtypes``
+    Command-line argument types and the rank-0-only parser.
+"""

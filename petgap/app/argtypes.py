@@ -1,4 +1,4 @@
-"""Argument types for the command lines (``petgap``, ``petgap-post``).
+"""Argument types and parsers for the command lines (``petgap``, ``petgap-post``).
 
 Each turns the text of one option into a value or raises
 ``argparse.ArgumentTypeError`` with a message naming the text and what is
@@ -34,3 +34,24 @@ def positive_int(text):
     if value < 1:
         raise argparse.ArgumentTypeError(f"{value} is not positive")
     return value
+
+
+class _RankParser(argparse.ArgumentParser):
+    """An ArgumentParser that prints (usage, help, errors) only if ``rank`` is 0."""
+
+    rank = 0
+
+    def _print_message(self, message, file=None):
+        if self.rank == 0:
+            super()._print_message(message, file)
+
+
+def root_parser(rank, **kwargs):
+    """An ArgumentParser that prints only on rank 0 of an MPI job.
+
+    Every rank parses the same command line and reaches the same verdict (exit
+    or go on), but only rank 0 prints usage, help and errors, once.  The class
+    is made per parser so that its subparsers (made from the same class) know
+    the rank too.
+    """
+    return type("RankParser", (_RankParser,), {"rank": rank})(**kwargs)

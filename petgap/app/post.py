@@ -37,9 +37,9 @@ and analysed with :mod:`petgap.analysis`; rank 0 writes into ``DIR``:
     half a decade where ``p(g)`` falls with ``g`` and the local log-log slope
     (least squares over +-0.25 decade) stays within 0.05 of its median, beyond 2
     standard errors of the bin counts; if none qualifies, the flattest
-    half-decade, with a warning.  No exponent is assumed.  A fixed range such as
-    the former default 0.01-0.1 lies above the power law at workstation sizes
-    (512^2-2048^2, ``lambda_min = 32 a0``; ``docs/fig2.md``).  Columns:
+    half-decade, with a warning.  No exponent is assumed: a fixed range such as
+    0.01-0.1 lies above the power law at workstation sizes (512^2-2048^2,
+    ``lambda_min = 32 a0``; ``docs/fig2.md``).  Columns:
     ``resolved_gap_over_g0``, ``fit_range_source`` (``auto`` or ``--fit-range``),
     ``fit_range_x_min``, ``fit_range_x_max`` (bin centres for ``auto``),
     ``fit_range_bins``, ``fit_range_qualified`` and ``fit_range_slope_deviation``
@@ -107,8 +107,6 @@ import os
 
 os.environ.setdefault("H5PY_ALWAYS_USE_MPI", "1")  # before h5py is first imported
 
-import argparse  # noqa: E402
-import csv  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import re  # noqa: E402
@@ -116,9 +114,20 @@ import sys  # noqa: E402
 from dataclasses import dataclass, field  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+import h5py  # noqa: E402
 import numpy as np  # noqa: E402
-from petgap.app.argtypes import positive_float, positive_int  # noqa: E402
-from petgap.parallel.collective import root_decides as _root_decides
+from mpi4py import MPI  # noqa: E402
+
+from petgap import analysis  # noqa: E402
+from petgap.app.argtypes import positive_float, positive_int, root_parser  # noqa: E402
+from petgap.app.figures import fig2_series, fig3_series, figure2, figure3, figure4  # noqa: E402
+from petgap.app.tables import plain, plain_rows, write_csv, write_json  # noqa: E402
+from petgap.io.results import ResultFile, read_attrs, read_field, step_name  # noqa: E402
+from petgap.mechanics.interactions import ExponentialAdhesion  # noqa: E402
+from petgap.parallel.collective import root_decides  # noqa: E402
+from petgap.parallel.grid import DecompositionError, Grid  # noqa: E402
+from petgap.parallel.log import configure, report_failure  # noqa: E402
+from petgap.surfaces.self_affine import statistics  # noqa: E402
 
 #: Exit status of a user error.
 EXIT_USAGE = 2
@@ -127,8 +136,6 @@ TABLE_STEM = "gap-analysis"
 FIG2_STEM = "fig2-gap-distribution"
 FIG3_STEM = "fig3-adhesion"
 FIG4_STEM = "fig4-integrand"
-#: rho / g0 of the Fig. 4 curves (the paper's).
-FIG4_RHO_OVER_G0 = (0.01, 0.1, 1.0)
 #: Cut-off gaps g_c / g0 of the near-contact-area columns (Eq. 14): at g0, c_n = pi c;
 #: at 0.18 g0, c_n = c; at 1e-3 g0 (the roll-off of the paper's data), c_n = 0.031 c.
 GC_OVER_G0 = (1.0, 0.18, 1e-3)
@@ -187,7 +194,6 @@ def parse_input(text):
 
 def _check_result_file(path):
     """Rank 0: raise PostError unless ``path`` is a readable petgap result file."""
-    import h5py
     if not path.exists():
         raise PostError(f"{path}: file not found")
     if not path.is_file():
@@ -244,7 +250,6 @@ class Attributes:
 
 def step_attributes(result, index):
     """:class:`Attributes` of step ``index`` of an open :class:`petgap.io.results.ResultFile`."""
-    from petgap.io.results import read_attrs, step_name
     f = result.file
     name = step_name(index)
     sources = [(f"{name} attributes", read_attrs(f[name])), ("root attributes", read_attrs(f))]
@@ -274,9 +279,6 @@ class StepResult:
 
 def analyse_step(result, index, args, grids, comm, log):
     """Analyse step ``index`` of an open result file (collective)."""
-    from petgap import analysis
-    from petgap.parallel.grid import Grid
-    from petgap.io.results import read_field, step_name
 
     f = result.file
     name = step_name(index)
@@ -314,7 +316,6 @@ def analyse_step(result, index, args, grids, comm, log):
 
     key = (shape, dx, dy)
     if key not in grids:
-        from petgap.parallel.grid import DecompositionError
         grids.clear()  # one grid at a time: its FFT buffers are 16 bytes per point
         try:
             grids[key] = Grid(shape, size=(shape[0] * dx, shape[1] * dy), comm=comm,
@@ -332,7 +333,6 @@ def analyse_step(result, index, args, grids, comm, log):
                             f"'rms_slope', 'statistics.rms_slope', "
                             f"'topography.statistics.rms_slope', 'surface.rms_slope', and there "
                             f"is no 'topography' dataset to compute it from")
-        from petgap.surfaces.self_affine import statistics
         if tuple(f["topography"].shape) != shape:
             raise PostError(f"{where}: 'topography' has shape {tuple(f['topography'].shape)}, "
                             f"the step's fields {shape}")
@@ -407,7 +407,6 @@ def analyse_step(result, index, args, grids, comm, log):
     else:
         log.warning("%s: contact fraction %g: no d_rep/g0, so no collapse, fit or c_n", where, c)
     if adhesive:
-        from petgap.mechanics.interactions import ExponentialAdhesion
         force = analysis.attractive_force_measured(grid, gap, ExponentialAdhesion(w, rho),
                                                    pressure=pressure, gap_tolerance=tol)
         # with adhesion the wall reaction in contact is p + v'(0): F_rep = F - F_att
@@ -465,10 +464,9 @@ def solve_identity(result, index, attrs, kind, w, rho):
 
 def analyse_inputs(inputs, args, comm, log):
     """Analyse every step asked for (collective); returns a list of StepResult."""
-    from petgap.io.results import ResultFile
     out, grids = [], {}
     for item in inputs:
-        _root_decides(comm, lambda: _check_result_file(item.path))
+        root_decides(comm, lambda: _check_result_file(item.path))
         with ResultFile.open(item.path, comm) as result:
             if not result.complete:
                 log.warning("%s was not closed after a successful run (root attribute "
@@ -518,32 +516,16 @@ def check_outputs(args):
     d.mkdir(parents=True, exist_ok=True)
 
 
-def _clean(value):
-    """JSON/CSV-friendly scalar: NaN and inf become None, NumPy scalars Python ones."""
-    if isinstance(value, (np.floating, float)):
-        value = float(value)
-        return value if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
-
-
 def write_tables(results, args, groups, fig2, fig3):
     """The CSV and JSON tables; ``fig2``, ``fig3`` are the drawn series (:func:`fig2_series`,
     :func:`fig3_series`), recorded with their legend labels."""
-    from petgap import analysis
-    rows = [{k: _clean(r.row.get(k)) for k in COLUMNS} for r in results]
-    path = args.output_dir / f"{TABLE_STEM}.csv"
-    with open(path, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=COLUMNS)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: ("" if v is None else v) for k, v in row.items()})
-    import petgap
+    rows = plain_rows([r.row for r in results], COLUMNS)
+    write_csv(args.output_dir / f"{TABLE_STEM}.csv", rows, COLUMNS)
+    # Read at call time: petgap/__init__ imports the public API, which imports
+    # petgap.app; a module-level import could meet a half-made package.
+    from petgap import __version__
     doc = {
-        "petgap_version": petgap.__version__,
+        "petgap_version": __version__,
         "command_line": " ".join(sys.argv),
         "conventions": {
             "c": "A_rep / A0, repulsive contact = zero gap and p > 0",
@@ -581,8 +563,8 @@ def write_tables(results, args, groups, fig2, fig3):
                                "min_count": analysis.FIT_MIN_COUNT,
                                "sigmas": analysis.FIT_SIGMAS}},
         "fig3_references": [{"file": g.reference.row["file"], "step": g.reference.row["step"],
-                             "c": _clean(g.reference.row["c"]),
-                             "g0": _clean(g.reference.row["g0"]),
+                             "c": plain(g.reference.row["c"]),
+                             "g0": plain(g.reference.row["g0"]),
                              "normalised_steps": [[m.row["file"], m.row["step"]]
                                                   for m in g.members],
                              "duplicates": [[d.row["file"], d.row["step"]]
@@ -597,18 +579,16 @@ def write_tables(results, args, groups, fig2, fig3):
         "distributions": [{"file": r.row["file"], "step": r.row["step"],
                            "edges": r.distribution.edges.tolist(),
                            "counts": r.distribution.counts.tolist(),
-                           "density": [_clean(v) for v in r.distribution.density],
+                           "density": [plain(v) for v in r.distribution.density],
                            "zero_gap_fraction": r.distribution.zero_gap_fraction,
-                           "integral": _clean(r.distribution.integral)} for r in results],
+                           "integral": plain(r.distribution.integral)} for r in results],
     }
-    with open(args.output_dir / f"{TABLE_STEM}.json", "w") as fh:
-        json.dump(doc, fh, indent=1)
-        fh.write("\n")
+    write_json(args.output_dir / f"{TABLE_STEM}.json", doc)
 
 
 def fit_range_rule():
     """The rule of the default exponent fit range, in words (``--help``, JSON conventions)."""
-    from petgap import analysis as a
+    a = analysis
     return (f"the widest range of x = g/g0, at least {a.FIT_MIN_DECADES:g} decade, between "
             f"{a.FIT_RESOLUTION_FACTOR:g} x_res and {a.FIT_X_MAX:g} (x_res = "
             f"(a0 / (2 d_rep))^(3/2): the gap half a pixel from a contact edge by Eq. 12, "
@@ -622,235 +602,13 @@ def fit_range_rule():
             f"fit_range_x_max and fit_range_bins")
 
 
-def _pyplot():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def _power_law_line(ax, xs):
-    xs = [x for x in xs if x.size]
-    if not xs:
-        lo, hi = 1e-4, 10.0
-    else:
-        lo = min(float(x[x > 0].min()) for x in xs if np.any(x > 0))
-        hi = max(float(x.max()) for x in xs)
-    grid = np.geomspace(lo, hi, 50)
-    ax.plot(grid, grid ** (-1.0 / 3.0), "k--", lw=1.2, label="Eq. 13: $(g/g_0)^{-1/3}$",
-            zorder=5)
-
-
-def _number(value):
-    """``32`` for 32.0000001, else three significant digits."""
-    if value is None or not math.isfinite(value):
-        return "?"
-    near = round(value)
-    return f"{near:d}" if near and abs(value - near) <= 1e-6 * abs(value) else f"{value:.3g}"
-
-
-@dataclass
-class Fig2Series:
-    """One series of Fig. 2: its step, legend label and marker."""
-    result: StepResult
-    label: str
-    marker: str
-    filled: bool
-
-
-@dataclass
-class Fig2Legend:
-    series: list
-    title: str
-
-
-#: Fig. 2 markers by rank of lambda_min (the smallest filled, as in the paper).
-FIG2_MARKERS = ("o", "o", "s", "^", "D", "v", "<", ">")
-
-
-def fig2_series(results):
-    """Legend labels and markers of Fig. 2 (pure; the same on every rank).
-
-    Each series is labelled with what tells it apart, in the paper's parameters:
-    ``lambda_min`` in pixels always (where known), ``lambda_max / lambda_min`` and
-    ``L / lambda_max`` where they differ between the series; the parameters that
-    all series share go into the legend title.  Series whose labels would still be
-    equal get ``(file:step)``; series without ``lambda_min`` are labelled
-    ``file:step``.  Markers: the smallest ``lambda_min`` filled circles, the next
-    open circles (the paper's Fig. 2), further ones open squares, triangles, ...
-    """
-    def params(r):
-        row = r.row
-        lmin, lmax = row["lambda_min"], row["lambda_max"]
-        lx, ly = row["nx"] * row["dx"], row["ny"] * row["dy"]
-        return {"lmin": r.meta["lambda_min_a0"],
-                "ratio": lmax / lmin if lmin and lmax else None,
-                "L": (lx / lmax, ly / lmax) if lmax else None}
-
-    plotted = [r for r in results if np.any(r.y > 0)]
-    info = [params(r) for r in plotted]
-
-    def varies(key):
-        values = {_key(p[key]) for p in info if p[key] is not None}
-        return len(values) > 1
-
-    def text(key, value):
-        if key == "lmin":
-            return f"$\\lambda_{{min}} = {_number(value)}\\,a_0$"
-        if key == "ratio":
-            return f"$\\lambda_{{max}}/\\lambda_{{min}} = {_number(value)}$"
-        lx, ly = value
-        both = _number(lx) if _key(lx) == _key(ly) else f"{_number(lx)} \\times {_number(ly)}"
-        return f"$L/\\lambda_{{max}} = {both}$"
-
-    shown = ["lmin"] + [k for k in ("ratio", "L") if varies(k)]
-    title = []
-    for key in ("ratio", "L"):
-        known = [p[key] for p in info if p[key] is not None]
-        if key not in shown and known:
-            title.append(text(key, known[0]))
-    labels = [", ".join(text(k, p[k]) for k in shown if p[k] is not None)
-              if p["lmin"] is not None else "" for p in info]
-    _disambiguate(labels, plotted)
-    lmins = sorted({_key(p["lmin"]) for p in info if p["lmin"] is not None})
-    series = []
-    for r, p, label in zip(plotted, info, labels):
-        rank = lmins.index(_key(p["lmin"])) if p["lmin"] is not None else 0
-        series.append(Fig2Series(r, label, FIG2_MARKERS[min(rank, len(FIG2_MARKERS) - 1)],
-                                 rank == 0))
-    return Fig2Legend(series, ", ".join(title))
-
-
-def _disambiguate(labels, results):
-    """Make ``labels`` unique in place: ``file:step`` for empty labels, appended to equal ones
-    (the file's stem, or its path where stems coincide)."""
-    def where(i, full):
-        name = results[i].row["file"] if full else Path(results[i].row["file"]).stem
-        return f"{name}:{results[i].row['step']}"
-
-    groups = {}
-    for i, label in enumerate(labels):
-        groups.setdefault(label, []).append(i)
-    for label, members in groups.items():
-        if label and len(members) == 1:
-            continue
-        full = len({where(i, False) for i in members}) < len(members)
-        for i in members:
-            labels[i] = f"{label} ({where(i, full)})" if label else where(i, full)
-
-
-def _key(value):
-    """A hashable, round-off-insensitive key of a number or a tuple of numbers."""
-    if isinstance(value, tuple):
-        return tuple(_key(v) for v in value)
-    return float(f"{value:.9g}")
-
-
-def figure2(legend, results, path):
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(5.5, 4.2))
-    for s in legend.series:
-        keep = s.result.y > 0
-        ax.loglog(s.result.x[keep], s.result.y[keep], s.marker, ms=4,
-                  fillstyle="full" if s.filled else "none", label=s.label)
-    _power_law_line(ax, [r.x for r in results])
-    ax.set_xlabel("$g/g_0$")
-    ax.set_ylabel(r"$p(g)\,/\,(2\pi c / 3 g_0)$")
-    ax.set_title("Gap distribution of non-contacting points (Fig. 2)", fontsize=10)
-    ax.legend(fontsize=7, title=legend.title or None, title_fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=150)
-    plt.close(fig)
-
-
-@dataclass
-class Fig3Series:
-    """One series of Fig. 3: a step, the reference it is normalised by, its label."""
-    result: StepResult
-    reference: StepResult
-    is_reference: bool
-    label: str
-
-
-def fig3_series(groups):
-    """The series of Fig. 3, each distinct reference once, then its members (pure)."""
-    out = []
-    for g in groups:
-        ref = g.reference
-        for r in [ref] + g.members:
-            if not r.distribution.centres.size:
-                continue
-            inv = r.row["inv_kappa_att"] if r.adhesive else 0.0
-            label = f"$1/\\kappa_{{att}}$ = {inv:.2g}" if inv is not None and math.isfinite(inv) \
-                else f"{Path(r.row['file']).stem}:{r.row['step']}"
-            label += f", $A_{{rep}}/A_0$ = {r.row['c']:.3g}"
-            if len(groups) > 1:
-                label += f" (ref. {Path(ref.row['file']).stem}:{ref.row['step']})"
-            out.append(Fig3Series(r, ref, r is ref, label))
-    return out
-
-
-def figure3(series, path):
-    """Fig. 3: each series normalised by its (non-adhesive) reference's c and g0."""
-    from petgap import analysis
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(5.5, 4.2))
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    xs, rhos = [], {}
-    for k, s in enumerate(series):
-        c, g0 = s.reference.row["c"], s.reference.row["g0"]
-        x, y = analysis.collapse(s.result.distribution, None, c, g0)
-        keep = y > 0
-        ax.loglog(x[keep], y[keep], "o" if s.is_reference else "s", ms=4,
-                  color=colours[k % len(colours)],
-                  fillstyle="full" if s.is_reference else "none", label=s.label)
-        xs.append(x)
-        if s.result.meta["rho"]:   # one line per value as labelled
-            rhos.setdefault(f"{s.result.meta['rho'] / g0:.3g}", s.result.meta["rho"] / g0)
-    _power_law_line(ax, xs)
-    for text, rho in sorted(rhos.items(), key=lambda item: item[1]):
-        ax.axvline(rho, color="0.5", ls=":", lw=1.2, label=f"$\\rho/g_0$ = {text}")
-    ax.set_xlabel("$g/g_0$ (non-adhesive $g_0$)")
-    ax.set_ylabel(r"$p(g)\,/\,(2\pi c / 3 g_0)$ (non-adhesive $c$, $g_0$)")
-    ax.set_title("Adhesive gap distributions (Fig. 3)", fontsize=10)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=150)
-    plt.close(fig)
-
-
-def figure4(path):
-    from petgap import analysis
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(5.5, 4.2))
-    x = np.geomspace(1e-5, 1e2, 400)
-    curves = analysis.fig4_integrand(x, FIG4_RHO_OVER_G0)
-    for r, y in zip(FIG4_RHO_OVER_G0, curves):
-        ax.semilogx(x, y, label=f"$\\rho/g_0$ = {r:g}")
-    ax.set_xlabel("$g/g_0$")
-    ax.set_ylabel(r"$x\,f(x)$: share of $F_{att}$ per unit $\ln(g/g_0)$")
-    ax.set_title("Integrand of Eq. 16 (Fig. 4)", fontsize=10)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=150)
-    plt.close(fig)
-
-
 # ---------------------------------------------------------------------- main
-class _Parser(argparse.ArgumentParser):
-    rank = 0
-
-    def _print_message(self, message, file=None):
-        if self.rank == 0:
-            super()._print_message(message, file)
-
-
 def build_parser(rank=0):
-    _Parser.rank = rank
-    p = _Parser(prog="petgap-post",
-                description="Gap distributions, contact perimeter and adhesion (the paper's "
-                            "Eqs. 2, 12-16 and Figs. 2-4) from petgap result files. MPI-aware: "
-                            "run as mpirun -n P petgap-post ... or serially.")
+    """The argument parser of ``petgap-post`` (only ``rank`` 0 prints)."""
+    p = root_parser(rank, prog="petgap-post",
+                    description="Gap distributions, contact perimeter and adhesion (the paper's "
+                                "Eqs. 2, 12-16 and Figs. 2-4) from petgap result files. "
+                                "MPI-aware: run as mpirun -n P petgap-post ... or serially.")
     p.add_argument("inputs", nargs="+", metavar="RUN.h5[:STEP]",
                    help="result files; FILE:STEP (3 or step_0003) picks one step, otherwise "
                         "all complete steps are analysed")
@@ -881,7 +639,6 @@ def build_parser(rank=0):
 def main(argv=None):
     """Entry point of ``petgap-post``; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    from mpi4py import MPI
     comm = MPI.COMM_WORLD
     parser = build_parser(comm.rank)
     try:
@@ -898,7 +655,6 @@ def main(argv=None):
         if comm.rank == 0:
             print(f"petgap-post: error: {problem}", file=sys.stderr, flush=True)
         return EXIT_USAGE
-    from petgap.parallel.log import configure, report_failure
     log = configure(comm, quiet=args.quiet).getChild("post")
     inputs = [parse_input(t) for t in args.inputs]
     failure_comm = comm.Dup()
@@ -911,15 +667,22 @@ def main(argv=None):
 
 
 def _find_reference(results, item, comm):
-    """The already analysed step ``item`` refers to (its first step if none is named), or None."""
+    """The already analysed step ``item`` refers to (its first step if none is named), or None.
+
+    Rank 0 compares the resolved paths, so that every rank picks the same step.
+    """
     def same(a, b):
         try:
             return Path(a).resolve() == Path(b).resolve()
         except OSError:
             return False
-    matches = [r for r in results if same(r.row["file"], item.path)
-               and (item.step is None or r.row["step"] == item.step)]
-    return min(matches, key=lambda r: r.row["step"]) if matches else None
+
+    def decide():
+        matches = [i for i, r in enumerate(results) if same(r.row["file"], item.path)
+                   and (item.step is None or r.row["step"] == item.step)]
+        return min(matches, key=lambda i: results[i].row["step"]) if matches else None
+    index = root_decides(comm, decide)
+    return None if index is None else results[index]
 
 
 def _usable(r):
@@ -986,7 +749,7 @@ def fig3_groups(results, reference, log=None):
 
 
 def _run(args, inputs, comm, log):
-    _root_decides(comm, lambda: check_outputs(args))
+    root_decides(comm, lambda: check_outputs(args))
     results = analyse_inputs(inputs, args, comm, log)
     if not results:
         raise PostError("no complete step to analyse in " + ", ".join(i.text for i in inputs))
@@ -1018,7 +781,7 @@ def _run(args, inputs, comm, log):
         figure4(paths[-1])
         return [str(p) for p in paths]
 
-    written = _root_decides(comm, write)
+    written = root_decides(comm, write)
     log.info("wrote %s", ", ".join(written))
     return 0
 

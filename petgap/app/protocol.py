@@ -62,3 +62,18 @@ def plan(scene):
         steps += [Step(k + i, "adhesive", True, None, reference_step=i) for i in range(k)]
         return steps
     return [Step(i, "sweep", adhesive, make(v)) for i, v in enumerate(values)]
+
+
+def control_of(step):
+    """The control of a planned step for :func:`petgap.solvers.sweep.sweep`.
+
+    A step of the adhesive chain imposes the mean gap its reference step found,
+    known only once that step is solved: a callable of the states before it.
+    """
+    if step.control is not None:
+        return step.control
+    reference = step.reference_step
+
+    def mean_gap_of_reference(states):
+        return MeanGap(states[reference].mean_gap)
+    return mean_gap_of_reference

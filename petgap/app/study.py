@@ -35,41 +35,35 @@ the output directory, never over existing files unless ``--overwrite``.
 
 One physical surface on every grid
 ----------------------------------
-:func:`petgap.surfaces.self_affine.self_affine` does *not* give the same surface for the same
-seed at another pixel size: Fourier row ``n`` draws its ``nx`` amplitudes in
-FFT column order from ``Philox(seed, n)``, so the modes with ``q_x >= 0`` (the
-first columns) coincide, but those with ``q_x < 0`` sit at columns ``nx - |m|``,
-which depend on ``nx``; and the rescaling to the rms slope then differs too
-(measured: 64^2 against 128^2 over the same ``L``: the ``q_x >= 0`` modes agree
-up to one factor 0.949, the others are unrelated).  The study therefore makes
-the scene's own surface once, on the scene's grid, keeps its Fourier modes with
-``|q| <= 2 pi / lambda_min`` (:func:`band_spectrum`; everything above is zero
-by construction, up to round-off, which is reported), and puts exactly those
-modes on every other grid (:func:`resample`): Fourier truncation onto coarser
-grids and zero padding onto finer ones.  For a band-limited surface whose band
-lies strictly inside each grid's Nyquist range this is exact -- every grid
-samples the same continuous surface, with the same rms height, slope and
-curvature to round-off -- and the scene's own grid gets the very surface
-``petgap run`` makes.  The modes kept are ``O((L / lambda_min)^2)``, independent
-of the resolution; they are gathered on every rank (a few kB to a few MB), the
-transforms are the grids' distributed FFTW-MPI plans, and no rank ever holds a
-global field.
+The same seed does not give the same surface at another pixel size, so the
+study makes the scene's own surface once, on the scene's grid, and puts its
+band-limited modes on every other grid (:mod:`petgap.surfaces.resampling`):
+every rung samples the same continuous surface, and the scene's own grid gets
+the very surface ``petgap run`` makes.
 """
 import argparse
-import csv
+import ctypes
 import dataclasses
 import gc
 import json
 import math
 import resource
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from mpi4py import MPI
 
+from petgap import analysis
 from petgap.app.argtypes import number_in, positive_float
+from petgap.app.build import build, make_grid, make_surface
+from petgap.app.study_report import StudyError, check_outputs, format_table, write_outputs
+from petgap.io.scene import Scene
+from petgap.parallel.collective import root_decides
+from petgap.parallel.grid import DecompositionError
+from petgap.parallel.log import get_logger
+from petgap.surfaces.resampling import band_spectrum, resample
 
 #: Solver tolerances of the tolerance ladder (loosest first).
 DEFAULT_TOLERANCES = (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
@@ -85,164 +79,10 @@ DEFAULT_MAX_POINTS = 4096 ** 2
 DEFAULT_FIT_RANGE = (1e-3, 0.1)
 #: Logarithmic bins per decade of the common ``x`` bins.
 BINS_PER_DECADE = 10
-#: Output files: ``<stem>.csv``, ``<stem>.json``, ``<stem>.png``.
-OUTPUT_STEM = "study"
-OUTPUT_SUFFIXES = (".csv", ".json", ".png")
 LADDERS = ("tolerance", "resolution")
-#: Quantities compared, in table order, and their descriptions.
-QUANTITIES = {
-    "c": "contact fraction A_rep / A0",
-    "d_rep": "mean contact diameter pi A_rep / P_rep (Eq. 2)",
-    "mean_gap": "mean gap (load control)",
-    "mean_pressure": "mean pressure (mean-gap control)",
-    "exponent": "exponent of the collapsed p(g) fitted over the common x = g/g0 range",
-    "prefactor": "prefactor of that fit (Eq. 13: 1)",
-    "F_att": "attractive force -sum dx dy v'(g) (Eq. 15; adhesive scenes)",
-}
-TITLES = {"c": "contact fraction c", "d_rep": "mean contact diameter d_rep",
-          "mean_gap": "mean gap", "mean_pressure": "mean pressure",
-          "exponent": "p(g) exponent (common x range)", "prefactor": "p(g) prefactor",
-          "F_att": "attractive force F_att"}
-# Relative slack of the band edge |q| <= 2 pi / lambda_min (far below a mode spacing 1/n).
-_BAND_SLACK = 1e-9
-
-
-class StudyError(ValueError):
-    """A study that cannot be made as asked (reported as a user error, exit status 2)."""
 
 
 # ======================================================= one surface, many grids
-@dataclass(frozen=True)
-class BandSpectrum:
-    """The Fourier modes of a band-limited periodic surface, independent of any grid.
-
-    ``h(x) = sum_q a_q exp(i q.x)`` over ``q = 2 pi (m / Lx, n / Ly)`` with
-    ``|m| <= kx``, ``0 <= n <= ky`` (the half plane; ``n < 0`` by Hermitian
-    symmetry) and ``|q| <= q_max``; ``a_q`` is the grid's unnormalised
-    coefficient over its number of points, ``c_q / N``, which does not depend on
-    the grid.  Identical on every rank.
-
-    Attributes
-    ----------
-    size : (float, float)
-        ``(Lx, Ly)``.
-    q_max : float
-        Band edge (``2 pi / lambda_min``).
-    kx, ky : int
-        Largest ``|m|`` and ``n`` in the band.
-    coefficients : ndarray, complex, shape ``(ky + 1, 2 kx + 1)``
-        ``a_q`` at row ``n``, column ``m + kx``; zero outside the band.
-    source_shape : (int, int)
-        The grid the modes were taken from.
-    dropped_power : float
-        Fraction of the source's height variance outside the band (round-off
-        for a generated self-affine surface; large for a rough measured one).
-    """
-
-    size: tuple
-    q_max: float
-    kx: int
-    ky: int
-    coefficients: np.ndarray
-    source_shape: tuple
-    dropped_power: float
-
-    def check_fits(self, shape):
-        """Why a grid of ``shape`` (same size) cannot hold the band exactly, or None."""
-        nx, ny = shape
-        if 2 * self.kx >= nx or 2 * self.ky >= ny:
-            return (f"the surface's band |q| <= {self.q_max:.6g} reaches |m| = {self.kx}, "
-                    f"n = {self.ky}, at or beyond the Nyquist modes of a {nx} x {ny} grid "
-                    f"(need 2 |m| < nx and 2 n < ny, i.e. lambda_min > 2 a0)")
-        return None
-
-
-def band_spectrum(grid, heights, lambda_min):
-    """The modes ``|q| <= 2 pi / lambda_min`` of this rank's slab of a surface (collective).
-
-    Parameters
-    ----------
-    grid : petgap.parallel.grid.Grid
-        Its FFT buffers are overwritten.
-    heights : ndarray, shape ``grid.local_shape``
-    lambda_min : float
-        Short-wavelength cutoff; the band must lie strictly inside the grid's
-        Nyquist range (else ValueError on every rank).
-
-    Returns
-    -------
-    BandSpectrum
-    """
-    from mpi4py import MPI
-    from petgap.parallel._fftw_mpi import weighted_power
-    if not (isinstance(lambda_min, (int, float)) and math.isfinite(lambda_min) and lambda_min > 0):
-        raise ValueError(f"lambda_min = {lambda_min!r}: need a positive length")
-    q_max = 2 * math.pi / float(lambda_min)
-    kx = int(math.floor(q_max * grid.Lx / (2 * math.pi) * (1 + _BAND_SLACK)))
-    ky = int(math.floor(q_max * grid.Ly / (2 * math.pi) * (1 + _BAND_SLACK)))
-    band = BandSpectrum(size=(grid.Lx, grid.Ly), q_max=q_max, kx=kx, ky=ky,
-                        coefficients=None, source_shape=grid.shape, dropped_power=math.nan)
-    problem = band.check_fits(grid.shape)
-    if problem is not None:
-        raise ValueError(f"cannot take the band-limited modes of the surface: {problem}")
-    comm = grid.comm
-    c = grid.forward(np.asarray(heights, dtype=np.float64))
-    total = weighted_power(c, grid.qx, grid.qy, grid.hermitian_weight, 0)
-    start = grid.ky_slice.start
-    if start == 0:
-        total -= abs(c[0, 0]) ** 2  # the mean is not roughness
-    rows = range(start, min(grid.ky_slice.stop, ky + 1))
-    m = np.arange(-kx, kx + 1)
-    local = np.zeros((len(rows), 2 * kx + 1), dtype=complex)
-    kept = 0.0
-    for i, n in enumerate(rows):
-        qy = 2 * math.pi * n / grid.Ly
-        qx = 2 * math.pi * m / grid.Lx
-        inside = qx ** 2 + qy ** 2 <= (q_max * (1 + _BAND_SLACK)) ** 2
-        values = np.where(inside, c[n - start, m % grid.nx], 0.0) / grid.npoints
-        local[i] = values
-        power = np.abs(values) ** 2
-        if n == 0:
-            power[kx] = 0.0  # the mean
-        kept += grid.hermitian_weight[n - start] * float(power.sum())
-    sums = np.array([total / grid.npoints ** 2, kept])
-    comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
-    parts = comm.allgather(local)
-    coefficients = np.concatenate(parts, axis=0)
-    dropped = max(sums[0] - sums[1], 0.0) / sums[0] if sums[0] > 0 else 0.0
-    return dataclasses.replace(band, coefficients=coefficients, dropped_power=float(dropped))
-
-
-def resample(band, grid):
-    """This rank's slab of the band-limited surface ``band`` on ``grid`` (collective).
-
-    Puts the band's modes, and nothing else, into the grid's Fourier slab and
-    transforms back: Fourier truncation onto a coarser grid, zero padding onto
-    a finer one, exact as long as the band lies strictly inside the grid's
-    Nyquist range (ValueError otherwise).  The grid must have the band's
-    physical size.
-
-    Returns
-    -------
-    ndarray, shape ``grid.local_shape``
-    """
-    lx, ly = band.size
-    if not (math.isclose(grid.Lx, lx, rel_tol=1e-12) and math.isclose(grid.Ly, ly, rel_tol=1e-12)):
-        raise ValueError(f"grid size {grid.Lx:g} x {grid.Ly:g} differs from the surface's "
-                         f"{lx:g} x {ly:g}")
-    problem = band.check_fits(grid.shape)
-    if problem is not None:
-        raise ValueError(f"cannot put the surface on this grid: {problem}")
-    fourier = grid.fourier
-    fourier[...] = 0.0
-    start, stop = grid.ky_slice.start, grid.ky_slice.stop
-    columns = np.arange(-band.kx, band.kx + 1) % grid.nx
-    for n in range(start, min(stop, band.ky + 1)):
-        fourier[n - start, columns] = band.coefficients[n]
-    # backward is unnormalised: sum_q a_q exp(i q.x) is the surface itself
-    return grid.backward().copy()
-
-
 class SurfaceSource:
     """The scene's surface, for the scene's grid and (band-limited) for any other.
 
@@ -252,7 +92,6 @@ class SurfaceSource:
     """
 
     def __init__(self, scene, comm, log, band=True):
-        from petgap.app.run import make_grid, make_surface
         self.scene = scene
         self.shape = scene.grid.shape
         self.band, self.reason = None, None
@@ -279,7 +118,6 @@ class SurfaceSource:
 
     def heights(self, scene, grid):
         """The surface on ``grid`` (the scene's own on its grid, else resampled)."""
-        from petgap.app.run import make_surface
         if grid.shape == self.shape and math.isclose(grid.Lx, self.scene.grid.size[0]):
             return make_surface(self.scene, grid)
         if self.band is None:
@@ -422,7 +260,7 @@ def apply_errors(rows, quantities, reference=None):
 
 
 def quantities_of(scene):
-    """The quantities compared for a scene (keys of :data:`QUANTITIES`)."""
+    """The quantities compared for a scene (keys of :data:`petgap.app.study_report.QUANTITIES`)."""
     control = scene.control
     protocol = control.reference == "non-adhesive"
     names = ["c", "d_rep", "mean_pressure" if control.kind == "mean-gap" else "mean_gap",
@@ -452,7 +290,6 @@ def _trim_heap():
     next rung and its peak would not show them.
     """
     try:
-        import ctypes
         ctypes.CDLL("libc.so.6").malloc_trim(0)
     except (OSError, AttributeError):
         pass
@@ -504,25 +341,18 @@ def _monitor(log, what, every=10.0):
 
 def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
                  bins_per_decade=BINS_PER_DECADE):
-    """Solve one rung from cold and measure it (collective); returns its table row (a dict)."""
-    from mpi4py import MPI
+    """Solve one rung from cold and measure it (collective); returns its table row (a dict).
 
-    from petgap import analysis
-    from petgap.app.run import _petsc_options_dict, make_grid
-    from petgap.mechanics.problem import ContactProblem, Load, MeanGap
-    from petgap.mechanics.half_space import ElasticHalfSpace
-    from petgap.mechanics.interactions import ExponentialAdhesion, check_resolution
-    from petgap.solvers.dispatch import solve
-
+    The rung's scene is built (:func:`petgap.app.build.build`) for its first
+    control value only, and solved as ``petgap run`` would solve those steps.
+    """
     scene = rung.scene
     modulus = scene.material.contact_modulus
     interaction = scene.interaction
     protocol = scene.control.reference == "non-adhesive"
     adhesive = interaction.kind == "exponential"
-    value = scene.control.values[0]
-    options = _petsc_options_dict(scene.solver.petsc_args())
-    solver = dict(solver=scene.solver.tao_type, tolerance=scene.solver.tolerance,
-                  max_iterations=scene.solver.max_iterations, options=options)
+    first = dataclasses.replace(scene, control=dataclasses.replace(
+        scene.control, values=tuple(scene.control.values[:1])))
     row = {"ladder": rung.ladder, "rung": rung.label, "value": rung.value, "nx": rung.nx,
            "ny": rung.ny, "a0": rung.a0, "tolerance": scene.solver.tolerance, "skipped": None,
            "lambda_min_a0": (scene.surface.lambda_min / rung.a0
@@ -531,28 +361,18 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
 
     with _PeakMemory() as memory:
         start = time.perf_counter()
-        grid = make_grid(scene, comm)
-        heights = source.heights(scene, grid)
-        half_space = ElasticHalfSpace(grid, modulus)
-        hard = ContactProblem(grid, heights, half_space)
-        sticky = None
+        # unresolved adhesion is measured, not refused: the study shows what it costs
+        model = build(first, comm, surface=lambda grid: source.heights(scene, grid),
+                      resolution_check="off" if interaction.resolution_check == "off"
+                      else "warn")
+        grid, hard = model.grid, model.problem
         if adhesive:
-            law = ExponentialAdhesion(interaction.work_of_adhesion, interaction.range)
-            mode = "off" if interaction.resolution_check == "off" else "warn"
-            report = check_resolution(law, min(grid.dx, grid.dy), modulus, mode)
-            row["adhesion_resolved"] = bool(report["resolved"])
-            sticky = ContactProblem(grid, heights, half_space, law)
+            row["adhesion_resolved"] = bool(model.resolution["resolved"])
         setup = time.perf_counter() - start
-        monitor = _monitor(log, what)
-        if protocol:
-            geometry = solve(hard, Load(value), monitor=monitor, **solver)
-            force_state = solve(sticky, MeanGap(geometry.mean_gap), monitor=monitor, **solver)
-            solutions = [geometry, force_state]
-        else:
-            problem = sticky if adhesive else hard
-            control = Load(value) if scene.control.kind == "load" else MeanGap(value)
-            geometry = force_state = solve(problem, control, monitor=monitor, **solver)
-            solutions = [geometry]
+        # the geometry from the first step (non-adhesive in the paper's protocol),
+        # the adhesive force from the last (the same step otherwise)
+        solutions = list(model.sweep(monitor=_monitor(log, what)))
+        geometry, force_state = solutions[0], solutions[-1]
     sums = np.array([memory.increase, memory.peak], dtype=float)
     comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
     times = np.array([sum(s.wall_time for s in solutions), setup])
@@ -592,8 +412,7 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
             fit.update(power_law_x_min=extent.x_min, power_law_decades=extent.decades)
     row.update(fit)
     if adhesive or protocol:
-        law = ExponentialAdhesion(interaction.work_of_adhesion, interaction.range)
-        force = analysis.attractive_force_measured(grid, force_state.gap, law,
+        force = analysis.attractive_force_measured(grid, force_state.gap, model.interaction,
                                                    pressure=force_state.pressure)
         row.update(F_att=force.force, F_att_noncontact=force.noncontact_force,
                    c_adhesive=force_state.contact_fraction,
@@ -605,7 +424,7 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
              "converged" if row["converged"] else "NOT converged", row["iterations"],
              row["fft_pairs"], row["wall_time"], row["setup_time"], row["bytes_per_point"], c,
              stats.mean_diameter)
-    del grid, heights, hard, sticky, solutions, geometry, force_state, gap, pressure
+    del model, grid, hard, solutions, geometry, force_state, gap, pressure
     gc.collect()
     return row
 
@@ -631,10 +450,7 @@ def run_study(scene, comm=None, *, tolerances=DEFAULT_TOLERANCES, resolutions=DE
     -------
     StudyResult
     """
-    from petgap.parallel.log import get_logger
-    if comm is None:
-        from mpi4py import MPI
-        comm = MPI.COMM_WORLD
+    comm = MPI.COMM_WORLD if comm is None else comm
     log = log or get_logger("study")
     check_scene(scene)
     quantities = quantities_of(scene)
@@ -669,7 +485,6 @@ def run_study(scene, comm=None, *, tolerances=DEFAULT_TOLERANCES, resolutions=DE
                 log.info("%s rung %s: the same solve as %s", ladder, rung.label,
                          row["shared_with"])
             else:
-                from petgap.parallel.grid import DecompositionError
                 try:
                     row = measure_rung(rung, source, comm, log, fit_range)
                 except DecompositionError as exc:  # raised on every rank alike
@@ -719,201 +534,6 @@ def check_scene(scene):
     if scene.control.kind == "none":
         raise StudyError("the scene has control.kind = \"none\": a study needs a load or a mean "
                          "gap to solve (its first control value is used)")
-
-
-# ====================================================================== outputs
-COLUMNS = ["ladder", "rung", "value", "reference", "skipped", "shared_with", "nx", "ny", "a0",
-           "lambda_min_a0", "tolerance", "converged", "reason", "iterations", "fft_pairs",
-           "wall_time", "setup_time", "bytes_per_point", "peak_rss_mib", "kkt_pressure",
-           "kkt_gap", "rms_height", "rms_slope", "adhesion_resolved", "c", "d_rep", "g0",
-           "mean_gap", "mean_pressure", "exponent", "prefactor", "fit_points",
-           "power_law_x_min", "power_law_decades", "F_att", "F_att_noncontact", "c_adhesive",
-           "inv_kappa_att"] + \
-          [f"err_{q}" for q in QUANTITIES]
-
-
-def output_paths(output_dir):
-    return [Path(output_dir) / f"{OUTPUT_STEM}{s}" for s in OUTPUT_SUFFIXES]
-
-
-def check_outputs(output_dir, overwrite, comm):
-    """Raise the same StudyError on every rank if the outputs cannot be written (rank 0 decides)."""
-    problem = None
-    if comm.rank == 0:
-        d = Path(output_dir)
-        if d.exists() and not d.is_dir():
-            problem = f"--output-dir {d} exists and is not a directory"
-        elif not overwrite:
-            existing = [str(p) for p in output_paths(d) if p.exists()]
-            if existing:
-                problem = (f"refusing to overwrite existing output {', '.join(existing)}; pass "
-                           f"--overwrite or choose another --output-dir")
-        if problem is None:
-            try:
-                d.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                problem = f"cannot create --output-dir {d}: {exc}"
-    problem = comm.bcast(problem, root=0)
-    if problem:
-        raise StudyError(problem)
-
-
-def _clean(value):
-    if isinstance(value, (np.floating, float)):
-        value = float(value)
-        return value if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
-
-
-def all_rows(study):
-    return [row for ladder in study.rows for row in study.rows[ladder]]
-
-
-def write_outputs(study, output_dir, argv=None):
-    """Write ``study.csv``, ``study.json`` and ``study.png`` (call on one rank)."""
-    csv_path, json_path, png_path = output_paths(output_dir)
-    rows = [{k: _clean(r.get(k)) for k in COLUMNS} for r in all_rows(study)]
-    with open(csv_path, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=COLUMNS)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: "" if v is None else v for k, v in row.items()})
-    from petgap import __version__
-    scene = study.scene
-    doc = {"petgap_version": __version__,
-           "command_line": " ".join(argv if argv is not None else sys.argv),
-           "scene_path": scene.path, "scene": scene.text, "scene_resolved": scene.to_dict(),
-           "settings": study.settings, "quantities": {q: QUANTITIES[q] for q in study.quantities},
-           "references": {ladder: (None if i is None else study.rows[ladder][i]["rung"])
-                          for ladder, i in study.references.items()},
-           "notes": study.notes,
-           "conventions": {
-               "error": "|q - q_ref| / |q_ref| against the ladder's reference rung (the most "
-                        "accurate converged one)",
-               "wall_time": "solver wall time, s (slowest rank; summed over the solves of a "
-                            "rung)",
-               "setup_time": "grid (FFT planning), surface and problem, s",
-               "fft_pairs": "elastic operator applications (one forward + one inverse FFT each)",
-               "bytes_per_point": "peak resident memory of grid + surface + problem + solve "
-                                  "above the resident memory before them, summed over ranks, "
-                                  "over nx ny",
-               "exponent, prefactor": "least-squares fit of log y on log x of the collapsed "
-                                      "p(g) (Eq. 13) on common log bins over the fit range",
-               "power_law_x_min, power_law_decades": "extent of the power law found by "
-                                                     "petgap.analysis.fit_power_law (no error)",
-               "F_att_noncontact, c_adhesive, inv_kappa_att": "adhesive state: the part of "
-                                                              "F_att from pixels outside "
-                                                              "repulsive contact, its contact "
-                                                              "fraction and 1/kappa_att (no "
-                                                              "error)"},
-           "rows": rows}
-    with open(json_path, "w") as fh:
-        json.dump(doc, fh, indent=1)
-        fh.write("\n")
-    figure(study, png_path)
-    return [csv_path, json_path, png_path]
-
-
-def figure(study, path):
-    """Relative error against solver wall time, one panel per quantity, both ladders."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import matplotlib.ticker  # noqa: F401  (matplotlib.ticker below)
-    quantities = study.quantities
-    ncols = 3
-    nrows = int(math.ceil(len(quantities) / ncols))
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.4 * nrows), squeeze=False)
-    styles = {"tolerance": ("o", "C0"), "resolution": ("s", "C3")}
-    floor = 1e-12
-    for ax, q in zip(axes.flat, quantities):
-        for ladder, rows in study.rows.items():
-            marker, colour = styles[ladder]
-            ref = study.references.get(ladder)
-            pts = [(r["wall_time"], r[f"err_{q}"], r["rung"]) for i, r in enumerate(rows)
-                   if not r.get("skipped") and i != ref and r.get("wall_time")
-                   and r.get(f"err_{q}") is not None and math.isfinite(r[f"err_{q}"])]
-            if not pts:
-                continue
-            t = np.array([p[0] for p in pts])
-            e = np.array([p[1] for p in pts])
-            shown = np.maximum(e, floor)
-            reflabel = rows[ref]["rung"] if ref is not None else "-"
-            ax.loglog(t, shown, "-", color=colour, lw=0.8, alpha=0.6)
-            ax.loglog(t[e >= floor], shown[e >= floor], marker, color=colour, ls="none",
-                      label=f"{ladder} (ref. {reflabel})")
-            if np.any(e < floor):
-                ax.loglog(t[e < floor], shown[e < floor], "v", color=colour, ls="none",
-                          label=f"{ladder}: error < {floor:g}")
-            for ti, si, ei, label in zip(t, shown, e, [p[2] for p in pts]):
-                if ei < floor:
-                    continue  # at the floor: the legend says so, labels would pile up
-                ax.annotate(label, (ti, si), fontsize=6, xytext=(3, 3),
-                            textcoords="offset points")
-        lo, hi = ax.get_xlim()
-        if hi < 10 * lo:  # at least a decade, so that the log axis has labelled ticks
-            mid = math.sqrt(lo * hi)
-            ax.set_xlim(mid / math.sqrt(10), mid * math.sqrt(10))
-        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        ax.set_title(TITLES[q], fontsize=9)
-        ax.set_xlabel("solver wall time [s]", fontsize=8)
-        ax.set_ylabel("relative error", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.grid(True, which="major", alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=6)
-    for ax in list(axes.flat)[len(quantities):]:
-        ax.axis("off")
-    name = Path(study.scene.path).name if study.scene.path else "scene"
-    fig.suptitle(f"petgap study: {name} (errors against each ladder's most accurate rung; "
-                 f"below {floor:g} drawn at {floor:g})", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-
-
-def _fmt(value, spec):
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "-"
-    return format(value, spec)
-
-
-def format_table(study):
-    """The printed table (a string)."""
-    lines = []
-    head = (f"{'rung':>9} {'grid':>11} {'conv':>4} {'its':>5} {'FFT':>6} {'wall s':>8} "
-            f"{'B/pt':>6} " + " ".join(f"{'err ' + q:>12}" for q in study.quantities))
-    for ladder, rows in study.rows.items():
-        ref = study.references.get(ladder)
-        scene = study.scene.grid
-        title = (f"{ladder} ladder" + (f" at {scene.nx} x {scene.ny}, a0 = {scene.a0:g}"
-                                        if ladder == "tolerance" else
-                                        f" at tolerance {study.scene.solver.tolerance:g}"))
-        if ref is not None:
-            r = rows[ref]
-            values = ", ".join(f"{q} = {_fmt(r.get(q), '.6g')}" for q in study.quantities)
-            title += f"; reference {r['rung']}: {values}"
-        lines.append(title)
-        lines.append(head)
-        for i, r in enumerate(rows):
-            if r.get("skipped"):
-                grid = f"{r['nx']}x{r['ny']}" if r.get("nx") else "-"
-                lines.append(f"{r['rung']:>9} {grid:>11} skipped: {r['skipped']}")
-                continue
-            errs = " ".join(f"{'ref' if i == ref else _fmt(r.get('err_' + q), '.2e'):>12}"
-                            for q in study.quantities)
-            lines.append(f"{r['rung']:>9} {str(r['nx']) + 'x' + str(r['ny']):>11} "
-                         f"{'yes' if r['converged'] else 'NO':>4} {r['iterations']:>5d} "
-                         f"{r['fft_pairs']:>6d} {r['wall_time']:>8.2f} "
-                         f"{_fmt(r['bytes_per_point'], '.0f'):>6} {errs}")
-        lines.append("")
-    for note in study.notes:
-        lines.append(f"note: {note}")
-    return "\n".join(lines).rstrip() + "\n"
 
 
 # ========================================================================== CLI
@@ -982,8 +602,6 @@ def add_parser(subparsers):
 
 def command(args, comm, petsc_args=()):
     """``petgap study``: run the study and write its outputs (collective); exit status."""
-    from petgap.parallel.log import get_logger
-    from petgap.io.scene import Scene
     if not args.fit_range[0] < args.fit_range[1]:
         raise StudyError(f"--fit-range {args.fit_range[0]:g} {args.fit_range[1]:g}: need LO < HI")
     tolerances = args.tolerances or (QUICK_TOLERANCES if args.quick else DEFAULT_TOLERANCES)
@@ -1004,24 +622,8 @@ def command(args, comm, petsc_args=()):
         try:
             written = write_outputs(study, output_dir)
         except OSError as exc:
-            return f"cannot write the study outputs in {output_dir}: {exc}"
+            raise StudyError(f"cannot write the study outputs in {output_dir}: {exc}") from None
         log.info("wrote %s", ", ".join(str(p) for p in written))
-        return None
-    problem = _on_root(comm, write)
-    if problem:
-        raise StudyError(problem)
+    # the other ranks sleep while rank 0 draws (Open MPI's broadcast would spin)
+    root_decides(comm, write, poll=0.02)
     return 0
-
-
-def _on_root(comm, func, poll=0.02):
-    """``func()`` on rank 0 while the others sleep-poll (not spin); its result on every rank.
-
-    Open MPI's blocking collectives busy-wait; on a machine with as many cores
-    as ranks that would starve rank 0 while it draws the figure.  ``func``
-    must not raise (return the problem instead).
-    """
-    result = func() if comm.rank == 0 else None
-    request = comm.Ibarrier()
-    while not request.Test():
-        time.sleep(poll)
-    return comm.bcast(result, root=0)

@@ -1,1 +1,2 @@
-"""TODO"""
+"""What goes in and out of a run: the scene schema (``scene``, TOML files) and
+the result files (``results``, parallel HDF5)."""

@@ -44,7 +44,10 @@ os.environ.setdefault("H5PY_ALWAYS_USE_MPI", "1")  # before the first import of 
 import h5py  # noqa: E402
 import numpy as np  # noqa: E402
 from h5py import h5d, h5fd, h5p, h5s  # noqa: E402
-from petgap.parallel.collective import root_decides as _root_decides  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+
+from petgap.parallel.collective import root_decides  # noqa: E402
+from petgap.parallel.log import failed_everywhere  # noqa: E402
 
 __all__ = ["ResultFile", "ResultExistsError", "ResultWriteError", "write_field", "read_field",
            "flatten_attrs", "step_name", "require_parallel_h5py", "check_free_space"]
@@ -82,10 +85,7 @@ def step_name(index):
 
 
 def _default_comm(comm):
-    if comm is None:
-        from mpi4py import MPI
-        comm = MPI.COMM_WORLD
-    return comm
+    return MPI.COMM_WORLD if comm is None else comm
 
 
 def check_output_path(path, comm=None, overwrite=False):
@@ -113,7 +113,7 @@ def check_output_path(path, comm=None, overwrite=False):
         if not os.access(parent, os.W_OK | os.X_OK):  # EROFS counts, even for root
             raise PermissionError(f"cannot create result file {path}: directory {parent} "
                                   f"is not writable (read-only file system or permissions)")
-    _root_decides(comm, check)
+    root_decides(comm, check)
 
 
 #: Bytes a write must leave free beyond its raw data, for HDF5 metadata (object
@@ -142,7 +142,7 @@ def check_free_space(path, nbytes, comm=None):
                           f"write needs about {need} bytes ({int(nbytes)} of data and "
                           f"{FREE_SPACE_MARGIN} kept for metadata), the file system has {free} "
                           f"bytes free; make room, then rerun the same command to continue")
-    _root_decides(comm, check)
+    root_decides(comm, check)
 
 
 def _git_commit():
@@ -162,30 +162,33 @@ def _git_commit():
 
 
 def _provenance(comm, extra):
-    """Root attributes describing this run, identical on every rank."""
+    """Root attributes describing this run, identical on every rank (rank 0's)."""
     hosts = comm.allgather(socket.gethostname())
-    if comm.rank != 0:
-        return comm.bcast(None, root=0)
-    import petgap
-    from mpi4py import MPI
-    attrs = {
-        "petgap_version": petgap.__version__,
-        "command_line": shlex.join(sys.argv),
-        "hostname": hosts[0],
-        "hosts": sorted(set(hosts)),
-        "start_time": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "mpi_size": comm.size,
-        "mpi_library": MPI.Get_library_version().replace("\0", "").strip().splitlines()[0],
-        "python_version": sys.version.split()[0],
-        "numpy_version": np.__version__,
-        "h5py_version": h5py.__version__,
-        "hdf5_version": h5py.version.hdf5_version,
-    }
-    commit = _git_commit()
-    if commit:
-        attrs["git_commit"] = commit
-    attrs.update(extra or {})
-    return comm.bcast(attrs, root=0)
+
+    def describe():
+        # Read at call time: petgap/__init__ imports the public API, which
+        # imports this module; a module-level import could meet a half-made package.
+        from petgap import __version__
+        attrs = {
+            "petgap_version": __version__,
+            "command_line": shlex.join(sys.argv),
+            "hostname": hosts[0],
+            "hosts": sorted(set(hosts)),
+            "start_time": datetime.datetime.now(datetime.timezone.utc).isoformat(
+                timespec="seconds"),
+            "mpi_size": comm.size,
+            "mpi_library": MPI.Get_library_version().replace("\0", "").strip().splitlines()[0],
+            "python_version": sys.version.split()[0],
+            "numpy_version": np.__version__,
+            "h5py_version": h5py.__version__,
+            "hdf5_version": h5py.version.hdf5_version,
+        }
+        commit = _git_commit()
+        if commit:
+            attrs["git_commit"] = commit
+        attrs.update(extra or {})
+        return attrs
+    return root_decides(comm, describe)
 
 
 # ------------------------------------------------------------------ attributes
@@ -378,7 +381,7 @@ class ResultFile:
         require_parallel_h5py()
         comm = _default_comm(comm)
         path = Path(path)
-        _root_decides(comm, lambda: _check_is_result(path))
+        root_decides(comm, lambda: _check_is_result(path))
         h5file = h5py.File(path, "r+", driver="mpio", comm=comm)
         self = cls(h5file, path, comm, writable=True)
         h5file.attrs["complete"] = np.bool_(False)
@@ -398,7 +401,7 @@ class ResultFile:
         require_parallel_h5py()
         comm = _default_comm(comm)
         path = Path(path)
-        _root_decides(comm, lambda: _check_is_result(path))
+        root_decides(comm, lambda: _check_is_result(path))
         return cls(h5py.File(path, "r+", driver="mpio", comm=comm), path, comm, writable=True)
 
     @classmethod
@@ -407,7 +410,7 @@ class ResultFile:
         require_parallel_h5py()
         comm = _default_comm(comm)
         path = Path(path)
-        _root_decides(comm, lambda: _check_is_result(path))
+        root_decides(comm, lambda: _check_is_result(path))
         return cls(h5py.File(path, "r", driver="mpio", comm=comm), path, comm, writable=False)
 
     # ------------------------------------------------------------ content
@@ -506,7 +509,6 @@ class ResultFile:
         if exc_type is None:
             self.close(complete=True)
             return False
-        from petgap.parallel.log import failed_everywhere
         if self.file is not None and failed_everywhere(self._failure_comm):
             if self.writable and isinstance(exc, OSError):
                 # An I/O error inside HDF5 (a full disk, a failing file system).  Closing

@@ -31,14 +31,17 @@ import dataclasses
 import difflib
 import json
 import math
+import numbers
 import re
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+from petgap.parallel.collective import root_decides
+
 __all__ = ["SceneError", "Scene", "GridSection", "SurfaceSection", "MaterialSection",
            "InteractionSection", "ControlSection", "SolverSection", "OutputSection",
-           "describe_schema"]
+           "describe_schema", "to_toml"]
 
 
 class SceneError(ValueError):
@@ -47,6 +50,9 @@ class SceneError(ValueError):
     def __init__(self, message, errors=()):
         super().__init__(message)
         self.errors = tuple(errors) if errors else (message,)
+
+    def __reduce__(self):  # keeps ``errors`` when rank 0's verdict is broadcast
+        return (type(self), (str(self), self.errors))
 
 
 class _Required:
@@ -644,24 +650,22 @@ class Scene:
         return cls._from_root(lambda: _parse(text, base, source, None), comm)
 
     @classmethod
+    def from_dict(cls, data, comm=None, base_dir=None):
+        """Validate a scene given as nested mappings (``{"grid": {"nx": 256}, ...}``).
+
+        For scenes made in code (benchmarks, notebooks, tests): the mappings are
+        written as TOML text (the scene's :attr:`text`, as stored in a result
+        file) and validated like a file.
+        """
+        return cls.from_text(to_toml(data), comm, base_dir=base_dir, source="<scene dict>")
+
+    @classmethod
     def _from_root(cls, parse, comm):
         if comm is None:
+            # deferred: the schema (validation, describe_schema) needs no MPI
             from mpi4py import MPI
             comm = MPI.COMM_WORLD
-        result, failure = None, None
-        if comm.rank == 0:
-            try:
-                result = ("ok", parse())
-            except SceneError as exc:
-                result = ("error", (str(exc), exc.errors))
-            except Exception as exc:  # a bug: still raised on every rank, not a hang
-                failure, result = exc, ("raise", exc)
-        status, payload = comm.bcast(result, root=0)
-        if status == "error":
-            raise SceneError(payload[0], payload[1])
-        if status == "raise":
-            raise failure if failure is not None else payload
-        return _build(payload)
+        return _build(root_decides(comm, parse))
 
     def to_dict(self):
         """The resolved scene as nested plain data (JSON-serialisable), without the text."""
@@ -677,6 +681,44 @@ class Scene:
     def to_json(self):
         """:meth:`to_dict` as compact JSON text."""
         return json.dumps(self.to_dict(), sort_keys=False, separators=(",", ":"))
+
+
+def to_toml(data):
+    """Nested mappings of sections and keys as TOML text (inline tables below the sections)."""
+    lines = []
+    for name, table in data.items():
+        if not isinstance(table, dict):
+            raise SceneError(f"{name} = {_toml_repr(table)}: is not a table; "
+                             f"allowed: a [{name}] section")
+        lines.append(f"[{_toml_key(name)}]")
+        lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in table.items()]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _toml_key(key):
+    key = str(key)
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key)
+
+
+def _toml_value(value):
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
+    if isinstance(value, numbers.Real):
+        value = float(value)
+        return repr(value) if math.isfinite(value) else ("nan" if value != value else
+                                                         ("inf" if value > 0 else "-inf"))
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}"
+                               for k, v in value.items()) + "}"
+    raise SceneError(f"{value!r}: a {type(value).__name__} has no TOML form; allowed: numbers, "
+                     f"strings, booleans, lists and tables")
 
 
 def _sections():

@@ -145,16 +145,17 @@ def test_failure_on_one_rank_aborts_instead_of_hanging(comm, mpi_tmp_path, run_c
     script = (
         "import sys\n"
         "from mpi4py import MPI\n"
-        "import petgap.app.run as cli\n"
-        "make_surface = cli.make_surface\n"
+        "import petgap.app.build as build\n"
+        "from petgap.app.main import main\n"
+        "make_surface = build.make_surface\n"
         "def crash(scene, grid):\n"
         "    if MPI.COMM_WORLD.rank == 1:\n"
         "        raise RuntimeError('rank 1 lost its surface')\n"
         "    h = make_surface(scene, grid)\n"
         "    grid.comm.Barrier()  # rank 0 would wait here forever\n"
         "    return h\n"
-        "cli.make_surface = crash\n"
-        "sys.exit(cli.main(sys.argv[1:]))\n")
+        "build.make_surface = crash\n"
+        "sys.exit(main(sys.argv[1:]))\n")
     start = time.monotonic()
     proc = run_cli([sys.executable, "-c", script, "run", scene, "-o", mpi_tmp_path / "crash.h5"],
                    ranks=2, env={"PETGAP_FAILURE_TIMEOUT": "2"}, timeout=120)

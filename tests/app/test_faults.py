@@ -29,7 +29,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from conftest import clean_env, wait_for_root
+from conftest import clean_env, shared_directory, wait_for_root
 from petgap.io.results import FREE_SPACE_MARGIN, read_attrs
 
 import h5py  # after petgap.io.results, which selects the MPI build  # noqa: E402
@@ -295,12 +295,8 @@ def assert_resumed(proc, result, reference, already):
 @pytest.fixture(scope="module")
 def shared():
     """A directory shared by all ranks for the whole module."""
-    path = tempfile.mkdtemp(prefix="petgap-faults-") if COMM.rank == 0 else None
-    path = Path(COMM.bcast(path, root=0))
-    yield path
-    COMM.Barrier()
-    if COMM.rank == 0:
-        shutil.rmtree(path, ignore_errors=True)
+    with shared_directory(COMM, prefix="petgap-faults-") as path:
+        yield path
 
 
 @pytest.fixture(scope="module")
@@ -519,7 +515,7 @@ def _grow(d):
 
 # The wrapper turns the free-space check off, so that HDF5 itself runs out of space.
 NO_CHECK = ("import sys; import petgap.io.results as h; h.FREE_SPACE_MARGIN = -2 ** 62; "
-            "import petgap.app.run as c; sys.exit(c.main(sys.argv[1:]))")
+            "import petgap.app.main as c; sys.exit(c.main(sys.argv[1:]))")
 
 
 @pytest.mark.parametrize("where", ["before-write", "inside-hdf5"])

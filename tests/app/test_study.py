@@ -13,6 +13,7 @@ import pytest
 from petgap.app import study
 from petgap.parallel.grid import Grid
 from petgap.io.scene import Scene
+from petgap.surfaces import resampling
 from petgap.surfaces.self_affine import self_affine, statistics
 from conftest import write_shared as write
 
@@ -34,19 +35,19 @@ def test_resample_keeps_the_band_exactly(comm):
     h = self_affine(source, 0.7, LAMBDA_MIN, 12.0, rms_slope=0.1, seed=5)
     h_global = gather_all(source, h)
     s_source = stats_tuple(statistics(source, h))
-    band = study.band_spectrum(source, h, LAMBDA_MIN)
+    band = resampling.band_spectrum(source, h, LAMBDA_MIN)
 
     fine = Grid((96, 80), size=SIZE, comm=comm, planner="estimate", wisdom=False)  # 2x finer
     coarse = Grid((17, 15), size=SIZE, comm=comm, planner="estimate", wisdom=False)  # odd, coarser
-    h_fine = gather_all(fine, study.resample(band, fine))
-    h_coarse_local = study.resample(band, coarse)
+    h_fine = gather_all(fine, resampling.resample(band, fine))
+    h_coarse_local = resampling.resample(band, coarse)
     h_coarse = gather_all(coarse, h_coarse_local)
     s_fine = stats_tuple(statistics(fine, fine.local_part(h_fine)))
     s_coarse = stats_tuple(statistics(coarse, h_coarse_local))
-    back = gather_all(source, study.resample(study.band_spectrum(fine, fine.local_part(h_fine),
-                                                                 LAMBDA_MIN), source))
+    back = gather_all(source, resampling.resample(
+        resampling.band_spectrum(fine, fine.local_part(h_fine), LAMBDA_MIN), source))
     noise = np.random.default_rng(comm.rank).standard_normal(source.local_shape)
-    dropped_noise = study.band_spectrum(source, noise, LAMBDA_MIN).dropped_power
+    dropped_noise = resampling.band_spectrum(source, noise, LAMBDA_MIN).dropped_power
     # the same seed on the finer grid is another surface (why the study resamples)
     other = gather_all(fine, self_affine(fine, 0.7, LAMBDA_MIN, 12.0, rms_slope=0.1, seed=5))
 
@@ -81,15 +82,15 @@ def test_resample_keeps_the_band_exactly(comm):
 def test_resample_refuses_a_grid_that_cannot_hold_the_band(comm):
     source = Grid((48, 40), size=SIZE, comm=comm, planner="estimate", wisdom=False)
     h = self_affine(source, 0.7, LAMBDA_MIN, 12.0, rms_slope=0.1, seed=5)
-    band = study.band_spectrum(source, h, LAMBDA_MIN)
+    band = resampling.band_spectrum(source, h, LAMBDA_MIN)
     too_coarse = Grid((12, 16), size=SIZE, comm=comm, planner="estimate", wisdom=False)
     other_size = Grid((48, 40), size=(24.0, 31.0), comm=comm, planner="estimate", wisdom=False)
     with pytest.raises(ValueError, match="Nyquist"):
-        study.resample(band, too_coarse)
+        resampling.resample(band, too_coarse)
     with pytest.raises(ValueError, match="differs"):
-        study.resample(band, other_size)
+        resampling.resample(band, other_size)
     with pytest.raises(ValueError, match="Nyquist"):
-        study.band_spectrum(source, h, 2 * source.dx)  # band at the source's own Nyquist
+        resampling.band_spectrum(source, h, 2 * source.dx)  # band at the source's own Nyquist
 
 
 # ------------------------------------------------------------------ the ladders

@@ -37,7 +37,8 @@ from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.parallel.grid import Grid
 from petgap.mechanics.interactions import (ExponentialAdhesion, HardWall, ResolutionError,
                                 ResolutionWarning, check_resolution, resolution_report)
-from petgap.solvers.dispatch import solve, sweep
+from petgap.solvers.dispatch import solve
+from petgap.solvers.sweep import sweep
 from petgap.surfaces.self_affine import self_affine
 
 E_STAR = 2.5  # not 1 where nothing is calibrated in units of E*: a misplaced E* must show

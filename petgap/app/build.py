@@ -1,0 +1,201 @@
+"""From a scene to the objects that are solved: one builder for every caller.
+
+``petgap run``, ``petgap study``, the benchmarks and the tests all turn a
+:class:`~petgap.io.scene.Scene` into the same objects the same way, so that a
+number measured by one of them is a number of the others::
+
+    scene -> grid -> topography -> half-space -> problems (hard wall, adhesive)
+          -> planned steps (petgap.app.protocol) -> sweep (petgap.solvers.sweep)
+
+A scene made in code works as one read from a file::
+
+    scene = Scene.from_dict({"grid": {"nx": 256}, "surface": {"hurst": 0.8,
+                             "lambda_min": 32, "rms_slope": 0.1},
+                             "control": {"kind": "load", "values": [0.01]}})
+    model = build(scene, comm)
+    states = list(model.sweep())
+"""
+import contextlib
+import functools
+from dataclasses import dataclass, field
+
+from mpi4py import MPI
+
+from petgap.app import protocol
+from petgap.mechanics.half_space import ElasticHalfSpace
+from petgap.mechanics.interactions import ExponentialAdhesion, check_resolution
+from petgap.mechanics.problem import ContactProblem
+from petgap.parallel.grid import Grid
+from petgap.parallel.log import timed
+from petgap.solvers.sweep import SweepStep, sweep
+from petgap.surfaces.self_affine import self_affine, statistics as surface_statistics
+from petgap.surfaces.topography import load_topography
+
+
+def make_grid(scene, comm):
+    """The :class:`~petgap.parallel.grid.Grid` of a scene on ``comm``."""
+    g = scene.grid
+    return Grid((g.nx, g.ny), size=g.size, comm=comm, planner=scene.solver.planner)
+
+
+def make_surface(scene, grid):
+    """This rank's slab of the scene's topography."""
+    s = scene.surface
+    if s.kind == "self-affine":
+        return self_affine(grid, s.hurst, s.lambda_min, s.lambda_max,
+                           rms_slope=s.rms_slope, rms_height=s.rms_height, seed=s.seed)
+    if s.kind == "file":
+        return load_topography(grid, s.path, s.dataset)
+    raise ValueError(f"surface.kind = {s.kind!r} is not implemented")  # the schema prevents it
+
+
+def petsc_options_dict(args):
+    """``["-a", "1", "-b"]`` -> ``{"a": "1", "b": ""}`` (a negative number is a value)."""
+    options, i = {}, 0
+    args = list(args)
+    while i < len(args):
+        name = args[i].lstrip("-")
+        if i + 1 < len(args) and not (args[i + 1].startswith("-") and
+                                      not _is_number(args[i + 1])):
+            options[name] = args[i + 1]
+            i += 2
+        else:
+            options[name] = ""
+            i += 1
+    return options
+
+
+def _is_number(text):
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+@dataclass
+class Model:
+    """What a scene builds to: the same on every rank, fields local.
+
+    Attributes
+    ----------
+    scene : petgap.io.scene.Scene
+    grid : petgap.parallel.grid.Grid
+    topography : ndarray
+        This rank's slab of the rigid surface.
+    half_space : petgap.mechanics.half_space.ElasticHalfSpace or None
+    problem : petgap.mechanics.problem.ContactProblem or None
+        The hard-wall problem.
+    adhesive_problem : petgap.mechanics.problem.ContactProblem or None
+        The problem with the scene's adhesive interaction, if it has one.
+    interaction : petgap.mechanics.interactions.ExponentialAdhesion or None
+    resolution : dict or None
+        :func:`~petgap.mechanics.interactions.check_resolution`'s report on
+        the adhesive interaction.
+    steps : list of petgap.app.protocol.Step
+        The planned solves, in order (empty for ``control.kind = "none"``:
+        then no half-space and no problem are made, so that a surface-only
+        run needs nothing of them, not even a rough surface).
+    petsc_args : list of str
+        The scene's ``solver.petsc_options`` and then the caller's, command-line style.
+    options : dict
+        The same as a PETSc options dict for :func:`petgap.solvers.dispatch.solve`.
+    """
+
+    scene: object
+    grid: object
+    topography: object
+    half_space: object = None
+    problem: object = None
+    adhesive_problem: object = None
+    interaction: object = None
+    resolution: dict = None
+    steps: list = field(default_factory=list)
+    petsc_args: list = field(default_factory=list)
+    options: dict = field(default_factory=dict)
+
+    @functools.cached_property
+    def statistics(self):
+        """Mean, rms height, slope and curvature of the surface (collective on first use)."""
+        return surface_statistics(self.grid, self.topography)
+
+    @property
+    def solve_options(self):
+        """Keyword arguments of :func:`petgap.solvers.dispatch.solve` from the scene's solver section."""
+        s = self.scene.solver
+        return dict(solver=s.tao_type, tolerance=s.tolerance, max_iterations=s.max_iterations,
+                    options=self.options)
+
+    def problem_of(self, step):
+        """The problem a planned step solves."""
+        return self.adhesive_problem if step.adhesive else self.problem
+
+    def sweep_steps(self, states=None):
+        """The planned steps as :class:`~petgap.solvers.sweep.SweepStep` s.
+
+        ``states`` maps step indices to states already found (a resumed run):
+        those steps are not solved again.
+        """
+        states = states or {}
+        return [SweepStep(control=protocol.control_of(step), problem=self.problem_of(step),
+                          chain=step.chain, state=states.get(step.index))
+                for step in self.steps]
+
+    def sweep(self, states=None, **solve_options):
+        """:func:`~petgap.solvers.sweep.sweep` over the planned steps (a generator, collective).
+
+        ``solve_options`` override :attr:`solve_options` (e.g. a ``monitor``,
+        or ``before``).
+        """
+        return sweep(None, self.sweep_steps(states), **{**self.solve_options, **solve_options})
+
+
+def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=None, log=None):
+    """Build a scene's grid, surface, problems and steps on ``comm`` (collective).
+
+    Parameters
+    ----------
+    scene : petgap.io.scene.Scene
+    comm : mpi4py.MPI.Comm, optional
+        Default ``COMM_WORLD``.
+    petsc_args : sequence of str
+        PETSc options (command-line style) after the scene's own.
+    surface : callable, optional
+        ``surface(grid)`` returns this rank's heights (default: the scene's
+        surface, :func:`make_surface`); ``petgap study`` puts one physical
+        surface on grids of other resolutions this way.
+    resolution_check : str, optional
+        ``"warn"``, ``"error"`` or ``"off"`` for an unresolved adhesive
+        interaction (default: the scene's ``interaction.resolution_check``).
+    log : logging.Logger, optional
+        Where the FFT planning and surface making are timed (default: not logged).
+
+    Returns
+    -------
+    Model
+    """
+    comm = MPI.COMM_WORLD if comm is None else comm
+    with _timed(log, f"planning FFTs ({scene.solver.planner})"):
+        grid = make_grid(scene, comm)
+    with _timed(log, "making the surface"):
+        topography = surface(grid) if surface is not None else make_surface(scene, grid)
+    args = list(scene.solver.petsc_args()) + list(petsc_args)
+    model = Model(scene=scene, grid=grid, topography=topography, steps=protocol.plan(scene),
+                  petsc_args=args, options=petsc_options_dict(args))
+    if not model.steps:
+        return model
+    modulus = scene.material.contact_modulus
+    model.half_space = ElasticHalfSpace(grid, modulus)
+    model.problem = ContactProblem(grid, topography, model.half_space)
+    interaction = scene.interaction
+    if interaction.kind == "exponential":
+        law = ExponentialAdhesion(interaction.work_of_adhesion, interaction.range)
+        mode = interaction.resolution_check if resolution_check is None else resolution_check
+        model.resolution = check_resolution(law, min(grid.dx, grid.dy), modulus, mode)
+        model.interaction = law
+        model.adhesive_problem = ContactProblem(grid, topography, model.half_space, law)
+    return model
+
+
+def _timed(log, what):
+    return timed(log, what) if log is not None else contextlib.nullcontext()

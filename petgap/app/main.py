@@ -1,0 +1,108 @@
+"""The ``petgap`` command: one parser, dispatching to its subcommands.
+
+``petgap run SCENE.toml [--output PATH] [--overwrite] [--quiet] [-- PETSC OPTIONS...]``
+    Run one scene (see :mod:`petgap.io.scene`) under ``mpirun -n P``.  The result
+    goes to ``PATH`` (default ``./<scene stem>.h5``), never over an existing
+    file unless ``--overwrite`` is given.  Everything after ``--`` is handed to
+    PETSc's options database, after the scene's ``solver.petsc_options``
+    (:mod:`petgap.app.run`).
+``petgap check SCENE.toml``
+    Validate a scene and print its resolved values.
+``petgap schema``
+    Print the scene schema as a markdown table.
+``petgap study SCENE.toml [--output-dir DIR] [--tolerances ...] [--resolutions ...] [--quick]``
+    Measure the speed/accuracy trade of a scene (see :mod:`petgap.app.study`).
+
+Each subcommand module registers itself (``add_parser``) and is called as
+``func(args, comm, petsc_args)``; none imports this one, so the commands do
+not depend on each other.
+
+Errors: an error every rank raises (an invalid scene, an impossible
+decomposition, an existing output file, ...) is printed once, by rank 0, as
+``petgap: error: <message>``, and every rank exits with status 2.  An exception
+raised on some ranks only is printed with its traceback by those ranks, and the
+job is aborted (``MPI_Abort``), so that no rank is left waiting forever.
+"""
+import json
+import sys
+
+from mpi4py import MPI
+
+from petgap.app import run, study
+from petgap.app.argtypes import root_parser
+from petgap.io.scene import Scene, describe_schema
+from petgap.parallel.log import configure, report_failure
+
+#: Exit status of a user error (invalid scene, existing output, ...).
+EXIT_USAGE = 2
+
+
+def _check(args, comm, petsc_args):
+    scene = Scene.from_file(args.scene, comm)
+    if comm.rank == 0:
+        for name, section in scene.to_dict().items():
+            print(f"[{name}]")
+            for k, v in section.items():
+                if v is not None:
+                    print(f"{k} = {json.dumps(v)}")
+            print()
+        print(f"# {args.scene}: valid", flush=True)
+    return 0
+
+
+def _schema(args, comm, petsc_args):
+    if comm.rank == 0:
+        print(describe_schema(), end="", flush=True)
+    return 0
+
+
+def build_parser(rank=0):
+    """The argument parser (only ``rank`` 0 prints)."""
+    # Read at call time: petgap/__init__ imports the public API, which imports
+    # petgap.app.run; a module-level import here could meet a half-made package.
+    from petgap import __version__
+    parser = root_parser(rank, prog="petgap",
+                         description="Contact, gaps and adhesion of rough elastic surfaces "
+                                     "(PETSc/TAO, FFTW-MPI). Run under mpirun -n P.")
+    parser.add_argument("--version", action="version", version=f"petgap {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    run.add_parser(sub)
+    check = sub.add_parser("check", help="validate a scene and print its resolved values")
+    check.add_argument("scene", metavar="SCENE.toml", help="scene file")
+    check.set_defaults(func=_check, quiet=False)
+    schema = sub.add_parser("schema", help="print the scene schema as a markdown table")
+    schema.set_defaults(func=_schema, quiet=False)
+    study.add_parser(sub)
+    return parser
+
+
+def main(argv=None):
+    """Entry point of the ``petgap`` console script; returns the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    petsc_args = []
+    if "--" in argv:
+        cut = argv.index("--")
+        argv, petsc_args = argv[:cut], argv[cut + 1:]
+    comm = MPI.COMM_WORLD
+    parser = build_parser(comm.rank)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # same argv on every rank: every rank exits alike
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    if petsc_args and args.command != "run":
+        if comm.rank == 0:
+            print("petgap: error: PETSc options after `--` are only for `petgap run`",
+                  file=sys.stderr, flush=True)
+        return EXIT_USAGE
+    configure(comm, quiet=args.quiet)
+    failure_comm = comm.Dup()  # reserved for agreeing on failures
+    try:
+        status = args.func(args, comm, petsc_args)
+    except Exception as exc:
+        return report_failure(exc, comm, failure_comm)
+    failure_comm.Free()
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

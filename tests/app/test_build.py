@@ -1,0 +1,129 @@
+"""The builder from a scene to the objects that are solved (petgap.app.build).
+
+Every test makes all its collective calls before its first assertion, so a
+failure on one rank cannot leave the other waiting in a collective.
+"""
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from petgap.app import protocol
+from petgap.app.build import Model, build, petsc_options_dict
+from petgap.io.scene import Scene
+from petgap.mechanics.interactions import ExponentialAdhesion, HardWall
+from petgap.mechanics.problem import ContactProblem, Load, MeanGap
+from petgap.solvers.sweep import SweepStep
+
+SCENE = {
+    "grid": {"nx": 64, "ny": 32, "a0": 0.5},
+    "surface": {"hurst": 0.8, "lambda_min": "8 a0", "rms_slope": 0.1, "seed": 3},
+    "material": {"contact_modulus": 2.0},
+    "control": {"kind": "load", "values": [0.002, 0.004]},
+    "solver": {"planner": "estimate", "tolerance": 1e-7, "max_iterations": 500,
+               "petsc_options": {"tao_max_it": 400}},
+}
+
+PROTOCOL = dict(SCENE, interaction={"kind": "exponential", "work_of_adhesion": 2e-4,
+                                    "range": "2 a0", "resolution_check": "off"},
+                control={"kind": "load", "values": [0.002, 0.004],
+                         "reference": "non-adhesive"})
+
+
+def gather_all(grid, local):
+    return np.concatenate(grid.comm.allgather(np.asarray(local)), axis=0)
+
+
+def test_scene_from_dict_is_the_scene_of_its_text(comm):
+    scene = Scene.from_dict(SCENE, comm)
+    again = Scene.from_text(scene.text, comm)
+    assert again.to_dict() == scene.to_dict()
+    assert scene.grid.shape == (64, 32) and scene.grid.size == (32.0, 16.0)
+    assert scene.surface.lambda_min == 4.0
+    assert dict(scene.solver.petsc_options) == {"tao_max_it": "400"}
+
+
+def test_hard_wall_scene_builds_grid_problem_and_steps(comm):
+    scene = Scene.from_dict(SCENE, comm)
+    model = build(scene, comm, petsc_args=["-tao_monitor"])
+    serial = build(scene, MPI.COMM_SELF)  # the same scene on one rank
+    heights = gather_all(model.grid, model.topography)
+    stats = model.statistics
+
+    assert isinstance(model, Model)
+    assert model.grid.shape == (64, 32) and model.grid.comm is comm
+    assert (model.grid.dx, model.grid.dy) == (0.5, 0.5)
+    assert model.topography.shape == model.grid.local_shape
+    assert isinstance(model.problem, ContactProblem)
+    assert isinstance(model.problem.interaction, HardWall)
+    assert model.half_space.contact_modulus == 2.0 and model.problem.half_space is model.half_space
+    assert model.adhesive_problem is None and model.interaction is None
+    assert model.resolution is None
+    assert model.steps == protocol.plan(scene)
+    assert [s.control for s in model.steps] == [Load(0.002), Load(0.004)]
+    assert model.petsc_args == ["-tao_max_it", "400", "-tao_monitor"]
+    assert model.options == {"tao_max_it": "400", "tao_monitor": ""}
+    assert model.solve_options == {"solver": "pcg", "tolerance": 1e-7, "max_iterations": 500,
+                                   "options": model.options}
+    assert stats.rms_slope == pytest.approx(0.1, rel=1e-9)
+    # the same surface and problem on 1 and on all ranks
+    np.testing.assert_array_equal(heights, serial.topography)
+    assert model.problem.rms_height == pytest.approx(serial.problem.rms_height, rel=1e-12)
+    assert model.problem.rms_slope == pytest.approx(serial.problem.rms_slope, rel=1e-12)
+    steps = model.sweep_steps()
+    assert [type(s) for s in steps] == [SweepStep] * 2
+    assert all(s.problem is model.problem and s.chain == "sweep" and s.state is None
+               for s in steps)
+
+
+def test_protocol_scene_builds_both_problems_and_chains(comm):
+    scene = Scene.from_dict(PROTOCOL, comm)
+    model = build(scene, comm)
+    steps = model.sweep_steps({0: "a state read back"})
+
+    assert isinstance(model.interaction, ExponentialAdhesion)
+    assert model.interaction.work == 2e-4 and model.interaction.range == 1.0
+    assert model.adhesive_problem.interaction is model.interaction
+    assert model.adhesive_problem.half_space is model.half_space
+    assert set(model.resolution) >= {"resolved", "message"}
+    assert [(s.index, s.chain, s.adhesive, s.reference_step) for s in model.steps] == \
+        [(0, "reference", False, None), (1, "reference", False, None),
+         (2, "adhesive", True, 0), (3, "adhesive", True, 1)]
+    assert [model.problem_of(s) for s in model.steps] == \
+        [model.problem, model.problem, model.adhesive_problem, model.adhesive_problem]
+    assert steps[0].state == "a state read back" and steps[1].state is None
+    assert steps[1].control == Load(0.004)
+    # the adhesive steps impose the mean gap their reference step found
+    assert callable(steps[3].control)
+
+    class Found:
+        mean_gap = 0.25
+    assert steps[3].control([None, Found()]) == MeanGap(0.25)
+
+
+def test_surface_only_scene_builds_no_problem(comm):
+    data = dict(SCENE, control={"kind": "none"})
+    data["surface"] = dict(SCENE["surface"])
+    model = build(Scene.from_dict(data, comm), comm)
+    assert model.steps == [] and model.problem is None and model.half_space is None
+    assert model.topography.shape == model.grid.local_shape
+
+
+def test_surface_and_resolution_check_can_be_given(comm):
+    scene = Scene.from_dict(dict(PROTOCOL, interaction=dict(PROTOCOL["interaction"],
+                                                            resolution_check="error")), comm)
+    seen = []
+
+    def flat_plus_bump(grid):
+        seen.append(grid.shape)
+        h = np.zeros(grid.local_shape)
+        h[:, :1] = 1.0
+        return h
+    model = build(scene, comm, surface=flat_plus_bump, resolution_check="off")
+    assert seen == [(64, 32)]
+    assert np.all(model.topography[:, 1:] == 0.0)
+    assert model.resolution is not None
+
+
+def test_petsc_options_dict():
+    assert petsc_options_dict(["-a", "1", "-b", "-c", "-1e-3", "--d", "x"]) == \
+        {"a": "1", "b": "", "c": "-1e-3", "d": "x"}
