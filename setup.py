@@ -1,6 +1,8 @@
-"""Build petgap and its compiled FFTW-MPI binding.
+"""Build petgap's compiled parts: the FFTW-MPI binding and the solvers' kernels.
 
-The binding (``petgap/_fftw_mpi.pyx``) is compiled against Debian's FFTW 3.3 MPI
+The package's metadata, dependencies and console scripts are in ``pyproject.toml``;
+this file only declares the Cython extensions, which need computed flags.  The
+binding (``petgap/parallel/_fftw_mpi.pyx``) is compiled against Debian's FFTW 3.3 MPI
 library and Open MPI; include and link flags come from ``mpicc --showme`` so that
 no compiler wrapper has to be set in the environment.
 """
@@ -63,14 +65,8 @@ contact_set = Extension(
 )
 
 setup(
-    name="petgap",
-    version="0.1.0",
-    description="Gap distributions and adhesion of rough elastic contacts (PETSc/TAO, FFTW-MPI)",
     packages=find_packages(include=["petgap", "petgap.*"]),
     ext_modules=cythonize([extension, kernels, contact_set], language_level=3,
                           compiler_directives={"boundscheck": False, "wraparound": False,
                                                "cdivision": True, "initializedcheck": False}),
-    python_requires=">=3.11",
-    entry_points={"console_scripts": ["petgap = petgap.app.main:main",
-                                      "petgap-post = petgap.app.post:main"]},
 )

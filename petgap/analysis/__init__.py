@@ -1,17 +1,27 @@
 """From solved fields to the paper's quantities: contact area, perimeter, gaps, adhesion.
 
+Modules: :mod:`.contact_geometry` (contact set, perimeter, ``d_rep``, ``g0``),
+:mod:`.gap_distribution` (``p(g)``, its collapse onto Eq. 13, power-law fits,
+the near-contact area of Eq. 14), :mod:`.adhesion` (the attractive force, Eqs.
+15-16, ``1 / kappa_att``), :mod:`.of_solution` (the same applied to a problem and
+its solution) and :mod:`._slabs` (slab bookkeeping shared by them).
+
 Every function works on a :class:`~petgap.parallel.grid.Grid`'s row slabs, ``(nx_local, ny)``,
 and returns global results that are the same on every rank (all functions are
 collective).  Nothing is ever gathered on one rank: what crosses a slab boundary
 (neighbouring pixels of the perimeter) is fetched as a few halo rows, and
 histograms and sums are reduced.
 
-Equation numbers are those of the paper the project implements, "Distribution of gaps
-and adhesive interaction between contacting rough surfaces" (``shared/paper/
-gap-distribution.md``; Monti, Sanner & Pastewka, Tribology Letters, 2021).
+The functions take a grid and field slabs, so that they apply to fields read
+back from a result file as well as to a fresh solution; the ``*_of(problem,
+solution)`` forms of :mod:`.of_solution` take a solved problem instead.
 
-Conventions (GUIDE section 4)
------------------------------
+Equation numbers are those of the paper the project implements, "Distribution of gaps
+and adhesive interaction between contacting rough surfaces" (Monti, Sanner &
+Pastewka, Tribology Letters, 2021, doi:10.1007/s11249-021-01454-6).
+
+Conventions
+-----------
 * Gap ``g >= 0`` (length), pressure ``p`` positive in compression, pixel area
   ``dx dy``, nominal area ``A0 = Lx Ly``, ``N = nx ny`` pixels, periodic in x and y.
 * Repulsive contact: zero gap, ``g <= gap_tolerance``, **and** ``p > 0``.  A pixel
@@ -37,12 +47,14 @@ Conventions (GUIDE section 4)
 
 from petgap.analysis.contact_geometry import (  # noqa: F401  (the package's API)
     contact_mask, resolve_gap_tolerance, GAP_ROUND_OFF, perimeter, crossing_fraction, contact_statistics, PerimeterResult, ContactStatistics)
-from petgap.analysis.gap_distribution import (  # noqa: F401  (the package's API)
+from petgap.analysis.gap_distributions import (  # noqa: F401  (the package's API)
     gap_distribution, collapse, fit_power_law, resolved_gap, auto_fit_range, FitRange, near_contact_area, near_contact_area_eq14, GapDistribution, PowerLawFit, NearContactArea,
     BINS_PER_DECADE, DEFAULT_RANGE, FIT_RESOLUTION_FACTOR, FIT_X_MAX, FIT_SLOPE_BAND,
     FIT_SLOPE_WINDOW, FIT_MIN_DECADES, FIT_MIN_COUNT, FIT_SIGMAS)
 from petgap.analysis.adhesion import (  # noqa: F401  (the package's API)
     attractive_force_measured, attractive_force_eq16, inverse_kappa_att, fig4_integrand, AttractiveForce, Eq16Force, GAMMA_2_3)
+from petgap.analysis.of_solution import (  # noqa: F401  (the package's API)
+    contact_statistics_of, gap_distribution_of, attractive_force_of, near_contact_area_of)
 
 __all__ = ["contact_mask", "resolve_gap_tolerance", "GAP_ROUND_OFF", "perimeter",
            "crossing_fraction", "contact_statistics",
@@ -51,4 +63,7 @@ __all__ = ["contact_mask", "resolve_gap_tolerance", "GAP_ROUND_OFF", "perimeter"
            "near_contact_area_eq14", "attractive_force_measured", "attractive_force_eq16",
            "inverse_kappa_att", "fig4_integrand", "PerimeterResult", "ContactStatistics",
            "GapDistribution", "PowerLawFit", "NearContactArea", "AttractiveForce",
-           "Eq16Force", "GAMMA_2_3"]
+           "Eq16Force", "GAMMA_2_3", "contact_statistics_of", "gap_distribution_of",
+           "attractive_force_of", "near_contact_area_of", "BINS_PER_DECADE", "DEFAULT_RANGE",
+           "FIT_RESOLUTION_FACTOR", "FIT_X_MAX", "FIT_SLOPE_BAND", "FIT_SLOPE_WINDOW",
+           "FIT_MIN_DECADES", "FIT_MIN_COUNT", "FIT_SIGMAS"]

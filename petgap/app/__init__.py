@@ -15,6 +15,15 @@
     ``petgap study``: the speed/accuracy trade of a scene, and its outputs.
 ``post``, ``figures``, ``tables``
     ``petgap-post``: the paper's tables and Figs. 2-4 from result files.
+``contact``
+    :func:`petgap.contact <petgap.app.contact.contact>`: a global height map in,
+    the solved contact and its statistics out (:class:`ContactResult`).  Import
+    the function from :mod:`petgap` or :mod:`petgap.app.contact`; this package
+    does not re-export it, so that ``petgap.app.contact`` stays the module.
 ``argtypes``
     Command-line argument types and the rank-0-only parser.
 """
+from petgap.app.contact import ContactResult
+from petgap.app.run import RunResult, run_scene
+
+__all__ = ["run_scene", "RunResult", "ContactResult"]

@@ -5,7 +5,7 @@
 number measured by one of them is a number of the others::
 
     scene -> grid -> topography -> half-space -> problems (hard wall, adhesive)
-          -> planned steps (petgap.app.protocol) -> sweep (petgap.solvers.sweep)
+          -> planned steps (petgap.app.protocol) -> sweep (petgap.solvers.sweeps)
 
 A scene made in code works as one read from a file::
 
@@ -27,7 +27,7 @@ from petgap.mechanics.interactions import ExponentialAdhesion, check_resolution
 from petgap.mechanics.problem import ContactProblem
 from petgap.parallel.grid import Grid
 from petgap.parallel.log import timed
-from petgap.solvers.sweep import SweepStep, sweep
+from petgap.solvers.sweeps import SweepStep, sweep
 from petgap.surfaces.self_affine import self_affine, statistics as surface_statistics
 from petgap.surfaces.topography import load_topography
 
@@ -131,7 +131,7 @@ class Model:
         return self.adhesive_problem if step.adhesive else self.problem
 
     def sweep_steps(self, states=None):
-        """The planned steps as :class:`~petgap.solvers.sweep.SweepStep` s.
+        """The planned steps as :class:`~petgap.solvers.sweeps.SweepStep` s.
 
         ``states`` maps step indices to states already found (a resumed run):
         those steps are not solved again.
@@ -142,7 +142,7 @@ class Model:
                 for step in self.steps]
 
     def sweep(self, states=None, **solve_options):
-        """:func:`~petgap.solvers.sweep.sweep` over the planned steps (a generator, collective).
+        """:func:`~petgap.solvers.sweeps.sweep` over the planned steps (a generator, collective).
 
         ``solve_options`` override :attr:`solve_options` (e.g. a ``monitor``,
         or ``before``).

@@ -65,7 +65,7 @@ def plan(scene):
 
 
 def control_of(step):
-    """The control of a planned step for :func:`petgap.solvers.sweep.sweep`.
+    """The control of a planned step for :func:`petgap.solvers.sweeps.sweep`.
 
     A step of the adhesive chain imposes the mean gap its reference step found,
     known only once that step is solved: a callable of the states before it.

@@ -207,7 +207,7 @@ def _write_step(model, output, step, solution):
 class _SavedState:
     """A completed step read back from the file: enough to warm-start and chain.
 
-    ``zero_gap_fraction`` (what :func:`petgap.solvers.sweep.annotate_step` compares) is
+    ``zero_gap_fraction`` (what :func:`petgap.solvers.sweeps.annotate_step` compares) is
     the stored attribute, else (a file without it) counted from the stored
     gap, else None: the next step is then not judged for a jump.
     """

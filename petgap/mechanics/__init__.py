@@ -1,1 +1,30 @@
-"""TODO"""
+"""The physics of one contact: the elastic half-space, the interaction, the problem and its solution.
+
+Nothing here iterates: a :class:`ContactProblem` states what is to be minimised
+(its objective, gradient and KKT residuals) and how a state is judged, and
+:mod:`petgap.solvers` finds the state.
+
+Modules
+-------
+:mod:`.half_space`
+    :class:`ElasticHalfSpace`: the periodic half-space, ``p_q = E* |q| u_q / 2``,
+    its inverse and elastic energy (paper Eq. 4).
+:mod:`.interactions`
+    :class:`HardWall` and :class:`ExponentialAdhesion` (``v(g) = -w exp(-g /
+    rho)``, paper Eq. 6), and whether a grid resolves an interaction
+    (:func:`resolution_report`, :func:`check_resolution`).
+:mod:`.problem`
+    The controls :class:`Load` (mean pressure) and :class:`MeanGap`,
+    :class:`ContactProblem` (topography, half-space, interaction; the
+    formulation and its KKT conditions) and :class:`ContactSolution` (fields,
+    scalars and the solver's status).
+"""
+from petgap.mechanics.half_space import ElasticHalfSpace
+from petgap.mechanics.interactions import (ExponentialAdhesion, HardWall, ResolutionError,
+                                           ResolutionWarning, check_resolution,
+                                           resolution_report)
+from petgap.mechanics.problem import ContactProblem, ContactSolution, Load, MeanGap
+
+__all__ = ["ElasticHalfSpace", "HardWall", "ExponentialAdhesion", "ResolutionError",
+           "ResolutionWarning", "check_resolution", "resolution_report", "Load", "MeanGap",
+           "ContactProblem", "ContactSolution"]

@@ -1,1 +1,24 @@
-"""TODO"""
+"""The parallel layer: one grid owns the communicator, the slab decomposition and the FFT.
+
+Everything above this package asks a :class:`Grid` for its local slices,
+wavevectors, transforms and global reductions, and is handed the communicator
+through it, never from a module global.
+
+Modules
+-------
+:mod:`.grid`
+    :class:`Grid`: the periodic ``nx x ny`` grid, its FFTW-MPI row slabs, the
+    transposed half-plane Fourier layout, FFT buffers and reductions (the
+    conventions every other module cites).
+:mod:`._fftw_mpi`
+    The compiled binding to FFTW-MPI: plans, the fused convolution with
+    ``|q|^(+-1)`` and spectral sums.
+:mod:`.collective`
+    :func:`root_decides`: rank 0 decides, every rank returns or raises alike.
+:mod:`.log`
+    Rank-aware progress messages and the handling of failures on some ranks.
+"""
+from petgap.parallel.collective import root_decides
+from petgap.parallel.grid import DecompositionError, Grid
+
+__all__ = ["Grid", "DecompositionError", "root_decides"]

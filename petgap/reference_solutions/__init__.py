@@ -31,3 +31,11 @@ from petgap.reference_solutions.johnson import (  # noqa: F401
     johnson_contact_half_width,
     johnson_gap_limit,
     johnson_half_width_at_mean_gap)
+
+__all__ = ["westergaard_full_contact_pressure", "westergaard_contact_half_width",
+           "westergaard_pressure", "westergaard_gap", "westergaard_mean_gap",
+           "westergaard_mean_pressure", "westergaard_elastic_energy",
+           "hertz_contact_radius", "hertz_max_pressure", "hertz_penetration", "hertz_pressure",
+           "hertz_gap", "johnson_parameter", "johnson_mean_pressure", "johnson_mean_gap",
+           "johnson_load_limits", "johnson_contact_half_width", "johnson_gap_limit",
+           "johnson_half_width_at_mean_gap"]

@@ -1,1 +1,28 @@
-"""TODO"""
+"""Finding the contact state: one entry point, its TAO bridge and petgap's own solvers.
+
+:func:`solve` takes a :class:`~petgap.mechanics.problem.ContactProblem` and a
+control and returns a :class:`~petgap.mechanics.problem.ContactSolution`;
+:func:`sweep` solves a list of controls, each step warm-started from the
+previous one.  Every solver stops on the same unit-free KKT test.
+
+Modules
+-------
+:mod:`.dispatch`
+    :func:`solve`, :func:`sweep`, :func:`annotate_step` and the bridge to PETSc
+    TAO (solver types :data:`SOLVER_TYPES`; ``-tao_type`` and the other PETSc
+    options have the last word).
+:mod:`.pressure_cg`
+    Polonsky-Keer conjugate gradients on the pressure, preconditioned by the
+    stiffness on the contact set (non-adhesive load control).
+:mod:`.gap_cg`
+    Projected conjugate gradients on the gap, preconditioned by the
+    compliance (mean-gap control, adhesion).
+:mod:`.coarse`
+    The start of a cold pressure solve from the same contact on a coarser grid.
+:mod:`.contact_set`, :mod:`._contact_set`, :mod:`._kernels`
+    The contact set as index lists and the compiled kernels of the solvers.
+"""
+from petgap.solvers.dispatch import SOLVER_TYPES, solve
+from petgap.solvers.sweeps import annotate_step, sweep
+
+__all__ = ["solve", "sweep", "annotate_step", "SOLVER_TYPES"]

@@ -12,7 +12,7 @@ from petgap.app.build import Model, build, petsc_options_dict
 from petgap.io.scene import Scene
 from petgap.mechanics.interactions import ExponentialAdhesion, HardWall
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
-from petgap.solvers.sweep import SweepStep
+from petgap.solvers.sweeps import SweepStep
 
 SCENE = {
     "grid": {"nx": 64, "ny": 32, "a0": 0.5},

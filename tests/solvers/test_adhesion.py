@@ -38,7 +38,7 @@ from petgap.parallel.grid import Grid
 from petgap.mechanics.interactions import (ExponentialAdhesion, HardWall, ResolutionError,
                                 ResolutionWarning, check_resolution, resolution_report)
 from petgap.solvers.dispatch import solve
-from petgap.solvers.sweep import sweep
+from petgap.solvers.sweeps import sweep
 from petgap.surfaces.self_affine import self_affine
 
 E_STAR = 2.5  # not 1 where nothing is calibrated in units of E*: a misplaced E* must show

@@ -33,7 +33,7 @@ from petgap.solvers import pressure_cg as pk
 from petgap.mechanics.interactions import ExponentialAdhesion, HardWall
 from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.solvers.dispatch import GapHessian, solve
-from petgap.solvers.sweep import sweep
+from petgap.solvers.sweeps import sweep
 from petgap.surfaces.self_affine import self_affine
 
 E_STAR = 2.5  # not 1: a misplaced E* must show

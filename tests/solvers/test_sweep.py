@@ -1,4 +1,4 @@
-"""The sweep driver (petgap.solvers.sweep): chains, controls from earlier states,
+"""The sweep driver (petgap.solvers.sweeps): chains, controls from earlier states,
 states already found, and the simple form.
 
 Every test makes all its collective calls before its first assertion.
@@ -11,8 +11,8 @@ import pytest
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
-from petgap.solvers import sweep as sweep_module
-from petgap.solvers.sweep import SweepStep, sweep
+from petgap.solvers import sweeps as sweep_module
+from petgap.solvers.sweeps import SweepStep, sweep
 from petgap.surfaces.self_affine import self_affine
 
 OPTIONS = dict(tolerance=1e-8, max_iterations=2000)
