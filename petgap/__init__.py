@@ -64,8 +64,7 @@ does nothing else.  PETSc options for a solve go in ``solve(..., options={...})`
 to hand PETSc a script's command line instead, call ``petsc4py.init(sys.argv)``
 before ``import petgap``.
 """
-# Set before the subpackages load: modules that record the version import it from here.
-__version__ = "0.1.0"
+from petgap._version import __version__  # noqa: E402
 
 from petgap import analysis, reference_solutions  # noqa: E402
 from petgap.analysis import (  # noqa: E402

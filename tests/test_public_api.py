@@ -43,7 +43,7 @@ def test_subpackages_are_reexported_from():
     """The top level takes its names from the subpackages (their __init__ is the seam)."""
     assert petgap.Grid is petgap.parallel.Grid
     assert petgap.ContactProblem is petgap.mechanics.ContactProblem
-    assert petgap.solve is petgap.solvers.solve and petgap.sweep is petgap.solvers.sweeps
+    assert petgap.solve is petgap.solvers.solve and petgap.sweep is petgap.solvers.sweep
     assert petgap.Scene is petgap.io.Scene
     assert petgap.run_scene is petgap.app.run_scene
     assert petgap.contact_statistics_of is petgap.analysis.contact_statistics_of
@@ -116,11 +116,12 @@ def test_end_to_end_through_the_public_api(comm):
 
 
 def test_version_is_the_package_metadata():
-    """pyproject.toml reads the version from petgap.__version__ (one source)."""
+    """pyproject.toml reads the version from petgap/_version.py, as petgap does (one source)."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     assert "version" in project.get("dynamic", [])
     dynamic = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["dynamic"]
-    assert dynamic["version"] == {"attr": "petgap.__version__"}
+    assert dynamic["version"] == {"attr": "petgap._version.__version__"}
+    assert petgap._version.__version__ == petgap.__version__
     assert re.fullmatch(r"\d+\.\d+\.\d+", petgap.__version__)
 
 

@@ -25,9 +25,9 @@ def pyplot():
     Imported on first use, so that the commands start, and run on every rank
     but the one that draws, without loading matplotlib.
     """
-    import matplotlib
+    import matplotlib  # deferred: only the rank that draws loads matplotlib
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred, after choosing the Agg backend
     return plt
 
 

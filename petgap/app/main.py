@@ -27,11 +27,13 @@ import json
 import sys
 
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from petgap.app import run, study
 from petgap.app.argtypes import root_parser
 from petgap.io.scene import Scene, describe_schema
 from petgap.parallel.log import configure, report_failure
+from petgap._version import __version__
 
 #: Exit status of a user error (invalid scene, existing output, ...).
 EXIT_USAGE = 2
@@ -58,9 +60,6 @@ def _schema(args, comm, petsc_args):
 
 def build_parser(rank=0):
     """The argument parser (only ``rank`` 0 prints)."""
-    # Read at call time: petgap/__init__ imports the public API, which imports
-    # petgap.app.run; a module-level import here could meet a half-made package.
-    from petgap import __version__
     parser = root_parser(rank, prog="petgap",
                          description="Contact, gaps and adhesion of rough elastic surfaces "
                                      "(PETSc/TAO, FFTW-MPI). Run under mpirun -n P.")
@@ -74,6 +73,19 @@ def build_parser(rank=0):
     schema.set_defaults(func=_schema, quiet=False)
     study.add_parser(sub)
     return parser
+
+
+def _keep_petsc_options(petsc_args):
+    """Keep the command line's PETSc options in force until PETSc finalises at exit.
+
+    Each solve also applies them (:mod:`petgap.app.run`), but some are read only
+    when PETSc finalises: ``-log_view`` prints its table then, from the events
+    logged since :func:`PETSc.Log.begin` (petgap's operator and kernels among them).
+    """
+    options = PETSc.Options()
+    options.insertString(" ".join(petsc_args))
+    if options.hasName("log_view"):
+        PETSc.Log.begin()
 
 
 def main(argv=None):
@@ -95,6 +107,8 @@ def main(argv=None):
                   file=sys.stderr, flush=True)
         return EXIT_USAGE
     configure(comm, quiet=args.quiet)
+    if petsc_args:
+        _keep_petsc_options(petsc_args)
     failure_comm = comm.Dup()  # reserved for agreeing on failures
     try:
         status = args.func(args, comm, petsc_args)

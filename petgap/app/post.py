@@ -128,6 +128,7 @@ from petgap.parallel.collective import root_decides  # noqa: E402
 from petgap.parallel.grid import DecompositionError, Grid  # noqa: E402
 from petgap.parallel.log import configure, report_failure  # noqa: E402
 from petgap.surfaces.self_affine import statistics  # noqa: E402
+from petgap._version import __version__
 
 #: Exit status of a user error.
 EXIT_USAGE = 2
@@ -521,9 +522,6 @@ def write_tables(results, args, groups, fig2, fig3):
     :func:`fig3_series`), recorded with their legend labels."""
     rows = plain_rows([r.row for r in results], COLUMNS)
     write_csv(args.output_dir / f"{TABLE_STEM}.csv", rows, COLUMNS)
-    # Read at call time: petgap/__init__ imports the public API, which imports
-    # petgap.app; a module-level import could meet a half-made package.
-    from petgap import __version__
     doc = {
         "petgap_version": __version__,
         "command_line": " ".join(sys.argv),

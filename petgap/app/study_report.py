@@ -12,6 +12,7 @@ import numpy as np
 from petgap.app.figures import pyplot
 from petgap.app.tables import plain_rows, write_csv, write_json
 from petgap.parallel.collective import root_decides
+from petgap._version import __version__
 
 #: Output files: ``<stem>.csv``, ``<stem>.json``, ``<stem>.png``.
 OUTPUT_STEM = "study"
@@ -77,9 +78,6 @@ def write_outputs(study, output_dir, argv=None):
     csv_path, json_path, png_path = output_paths(output_dir)
     rows = plain_rows(all_rows(study), COLUMNS)
     write_csv(csv_path, rows, COLUMNS)
-    # Read at call time: petgap/__init__ imports the public API, which imports
-    # this module; a module-level import could meet a half-made package.
-    from petgap import __version__
     scene = study.scene
     doc = {"petgap_version": __version__,
            "command_line": " ".join(argv if argv is not None else sys.argv),

@@ -48,6 +48,7 @@ from mpi4py import MPI  # noqa: E402
 
 from petgap.parallel.collective import root_decides  # noqa: E402
 from petgap.parallel.log import failed_everywhere  # noqa: E402
+from petgap._version import __version__
 
 __all__ = ["ResultFile", "ResultExistsError", "ResultWriteError", "write_field", "read_field",
            "flatten_attrs", "step_name", "require_parallel_h5py", "check_free_space"]
@@ -166,9 +167,6 @@ def _provenance(comm, extra):
     hosts = comm.allgather(socket.gethostname())
 
     def describe():
-        # Read at call time: petgap/__init__ imports the public API, which
-        # imports this module; a module-level import could meet a half-made package.
-        from petgap import __version__
         attrs = {
             "petgap_version": __version__,
             "command_line": shlex.join(sys.argv),

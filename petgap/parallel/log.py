@@ -21,6 +21,8 @@ import time
 import traceback
 import warnings
 
+from mpi4py import MPI
+
 LOGGER_NAME = "petgap"
 
 #: ``logger.warning(msg, extra=EVERY_RANK)``: a warning about this rank's own data,
@@ -81,7 +83,6 @@ def configure(comm=None, quiet=False, stdout=None, stderr=None):
         Streams (default ``sys.stdout`` and ``sys.stderr`` at call time).
     """
     if comm is None:
-        from mpi4py import MPI
         comm = MPI.COMM_WORLD
     stdout = sys.stdout if stdout is None else stdout
     stderr = sys.stderr if stderr is None else stderr

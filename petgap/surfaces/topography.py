@@ -186,7 +186,7 @@ def _check_layout(what, file_shape, dtype, shape):
 
 def _choose_dataset(f, dataset, path):
     """Name of the dataset to read: the one asked for, ``topography``, or the only 2D one."""
-    import h5py
+    h5py = _import_h5py()
     datasets = {}
 
     def collect(name, obj):  # returns None: a value would stop the visit
@@ -247,5 +247,5 @@ def _check_finite(grid, local, what):
 def _import_h5py():
     """h5py, its MPI build when available (Debian picks the serial one unless told)."""
     os.environ.setdefault("H5PY_ALWAYS_USE_MPI", "1")
-    import h5py
+    import h5py  # deferred: the environment must choose the MPI build first, and .npy needs no h5py
     return h5py

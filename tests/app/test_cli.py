@@ -80,6 +80,19 @@ def test_run_writes_result(comm, mpi_tmp_path, run_cli):
     np.testing.assert_allclose(inspect(comm, serial)[1], topography, rtol=0, atol=1e-14)
 
 
+def test_log_view_shows_the_operator_events(comm, mpi_tmp_path, run_cli):
+    """``petgap run ... -- -log_view`` prints PETSc's log with petgap's own events."""
+    scene = write(comm, mpi_tmp_path / "logged.toml", SCENE)
+    proc = run_cli(["petgap", "run", scene, "--output", mpi_tmp_path / "logged.h5", "--quiet",
+                    "--", "-log_view", f":{mpi_tmp_path / 'log.txt'}"], ranks=2)
+    assert proc.returncode == 0, proc.stderr
+    rows = [line.split() for line in (mpi_tmp_path / "log.txt").read_text().splitlines()
+            if line.startswith("petgap: ")]
+    names = {" ".join(r[:3]) for r in rows}
+    assert {"petgap: K u", "petgap: K^-1 p"} <= names
+    assert all(int(r[3]) > 0 for r in rows if " ".join(r[:3]) in names)
+
+
 def test_default_output_is_scene_stem_in_cwd(comm, mpi_tmp_path, run_cli):
     scene = write(comm, mpi_tmp_path / "stem.toml", SCENE.replace('"load"', '"none"')
                   .replace("values = [0.002]", ""))
