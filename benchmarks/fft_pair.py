@@ -1,27 +1,30 @@
 #!/usr/bin/env python3
-"""petgap's FFT transform pair against the FFTW-MPI floor (GUIDE section 2).
+"""petgap's FFT transform pair: the floor of an iteration, and the operator against it.
 
-For each grid size N and rank count P this alternates, round by round, two
-measurements of one forward (r2c) plus one backward (c2r) 2D transform of an
-N x N field:
+An iteration of the solvers costs a few transform pairs; the pair itself is
+therefore the floor the solvers' time is measured against
+(``benchmarks/contact.py`` takes its floor from :func:`run_petgap`).  For each
+grid size N and rank count P this measures one forward (r2c) plus one
+backward (c2r) 2D transform of an N x N field:
 
-* ``../shared/bench/fft_limit N P`` (C, FFTW-MPI, FFTW_MEASURE, transposed
-  layout; median of 15 pairs), and
 * petgap's own pair: ``Grid((N, N), planner="measure")``, ``grid.forward()`` then
-  ``grid.backward()`` on the grid's own buffers, timed exactly as fft_limit.c
-  does (barrier, MPI_Wtime, pair, barrier), median of ``--repeats`` pairs after
+  ``grid.backward()`` on the grid's own buffers, timed as a C program
+  would (barrier, MPI_Wtime, pair, barrier), median of ``--repeats`` pairs after
   ``--warmup`` untimed pairs, run under ``mpirun -n P``; and, in the same
   process, one application of the elastic operator as the solvers make it
   (``ElasticHalfSpace.apply_in_buffer``: the transforms fused with the Fourier
-  multiplier, ``Grid.convolve_qpower``), timed the same way.
+  multiplier, ``Grid.convolve_qpower``), timed the same way;
+* optionally (``--fft-limit PROGRAM``), a C program on FFTW-MPI alone that runs
+  as ``PROGRAM N P repeats`` and prints ``median_pair_s=...`` (FFTW_MEASURE,
+  transposed layout), to show what the Python binding costs over plain C.
 
-The order of the two alternates between rounds, so that slow drifts of a noisy
-machine hit both alike.  Printed: a markdown table of the medians over rounds of
-the per-run medians, and their ratio.
+With a C program the order of the two alternates between rounds, so that slow
+drifts of a noisy machine hit both alike.  Printed: a markdown table of the
+medians over rounds of the per-run medians, and their ratios.
 
 Usage (from the repository root, after ``source scripts/bootstrap.sh``)::
 
-    python benchmarks/fft_pair.py [--sizes 1024 2048] [--ranks 1 2] [--rounds 5]
+    python benchmarks/fft_pair.py [--sizes 1024 2048] [--ranks 1 2] [--rounds 5] [--fft-limit PROGRAM]
 
 ``--worker N`` is the inner measurement (run by the script under mpirun).
 """
@@ -36,12 +39,11 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-FFT_LIMIT = ROOT.parent / "shared" / "bench" / "fft_limit"
 
 
 def worker(n, repeats, warmup):
     """Time petgap's transform pair on an n x n grid; rank 0 prints the median."""
+    # Deferred to the worker: the driver process runs no MPI.
     import numpy as np
     from mpi4py import MPI
 
@@ -49,9 +51,9 @@ def worker(n, repeats, warmup):
     from petgap.parallel.grid import Grid
     comm = MPI.COMM_WORLD
     grid = Grid((n, n), comm=comm, planner="measure")
-    # Data as fft_limit.c's: uniform random numbers (after planning, which
-    # scribbles on the buffers).  Values grow by n^2 per unnormalised pair, as
-    # they do in fft_limit; 17 pairs stay far from overflow for n <= 8192.
+    # Uniform random numbers (after planning, which scribbles on the buffers).
+    # Values grow by n^2 per unnormalised pair; 17 pairs stay far from overflow
+    # for n <= 8192.
     grid.real[...] = np.random.default_rng(comm.rank).random(grid.local_shape)
     for _ in range(warmup):
         grid.forward()
@@ -99,12 +101,16 @@ def _run(cmd, what, env=None, attempts=2, keys=("median_pair_s",)):
     raise RuntimeError(f"{what} failed {attempts} times: {shlex.join(cmd)}")
 
 
-def run_fft_limit(n, ranks, repeats):
-    return _run([str(FFT_LIMIT), str(n), str(ranks), str(repeats)], "fft_limit")
+def run_fft_limit(program, n, ranks, repeats):
+    """The median pair of a C FFTW-MPI program (see the module docstring)."""
+    return _run([str(program), str(n), str(ranks), str(repeats)], "fft_limit")
 
 
 def run_petgap(n, ranks, repeats, warmup, wisdom="cached"):
-    """petgap's pair under mpirun; ``wisdom="fresh"`` plans from scratch, as fft_limit does."""
+    """Median seconds of petgap's pair and of one operator application, under mpirun.
+
+    ``wisdom="fresh"`` plans from scratch (as a C program without wisdom does).
+    """
     cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", sys.executable, str(Path(__file__)),
            "--worker", str(n), "--repeats", str(repeats), "--warmup", str(warmup)]
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
@@ -125,7 +131,9 @@ def main():
     parser.add_argument("--warmup", type=int, default=2, help="untimed pairs per petgap run")
     parser.add_argument("--wisdom", choices=["cached", "fresh"], default="cached",
                         help="petgap's FFTW wisdom: the on-disk cache (as petgap runs), or "
-                             "none, planning afresh each run (as fft_limit does)")
+                             "none, planning afresh each run (as a C program does)")
+    parser.add_argument("--fft-limit", type=Path, metavar="PROGRAM",
+                        help="a C FFTW-MPI program to compare with (module docstring)")
     parser.add_argument("--worker", type=int, metavar="N", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
@@ -143,17 +151,21 @@ def main():
                 order = (0, 1) if k % 2 == 0 else (1, 0)
                 for which in order:
                     if which == 0:
-                        limit.append(run_fft_limit(n, ranks, args.repeats))
+                        if args.fft_limit:
+                            limit.append(run_fft_limit(args.fft_limit, n, ranks, args.repeats))
                     else:
                         pair, op = run_petgap(n, ranks, args.repeats, args.warmup,
                                               args.wisdom)
                         ours.append(pair)
                         apply.append(op)
-                print(f"# N={n} ranks={ranks} round {k}: fft_limit {limit[-1]:.4f} s, "
-                      f"petgap pair {ours[-1]:.4f} s, operator {apply[-1]:.4f} s",
+                print(f"# N={n} ranks={ranks} round {k}: "
+                      + (f"fft_limit {limit[-1]:.4f} s, " if limit else "")
+                      + f"petgap pair {ours[-1]:.4f} s, operator {apply[-1]:.4f} s",
                       file=sys.stderr, flush=True)
-            a, b, c = (statistics.median(v) for v in (limit, ours, apply))
-            rows.append((n, ranks, a, b, b / a, c, c / a, min(limit), min(ours)))
+            b, c = statistics.median(ours), statistics.median(apply)
+            a = statistics.median(limit) if limit else float("nan")
+            rows.append((n, ranks, a, b, b / a, c, c / a, min(limit, default=float("nan")),
+                         min(ours)))
     print(f"# done {time.strftime('%H:%M')}, load average {os.getloadavg()[0]:.2f}",
           file=sys.stderr)
 

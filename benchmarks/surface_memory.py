@@ -12,13 +12,12 @@ Usage::
     mpirun -n P python benchmarks/surface_memory.py [--n 4096] [--planner estimate]
 
 Prints one table on rank 0.  The surface is H = 0.8, lambda_min = 32 pixels,
-lambda_max = n / 2 (GUIDE section 3).
+lambda_max = n / 2 (the paper's surfaces).
 """
 import argparse
 import resource
 import time
 
-import numpy as np
 from mpi4py import MPI
 
 from petgap.parallel.grid import Grid

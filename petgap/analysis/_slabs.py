@@ -54,13 +54,6 @@ def check_fields(grid, **arrays):
     return out
 
 
-def allreduce_sum(comm, values, dtype=np.float64):
-    values = np.asarray(values, dtype=dtype)
-    total = np.empty_like(values)
-    comm.Allreduce(values, total, op=MPI.SUM)
-    return total
-
-
 def positive(name, value):
     if isinstance(value, bool) or not isinstance(value, numbers.Real) \
             or not (math.isfinite(value) and value > 0):

@@ -7,7 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from petgap.analysis._slabs import allreduce_sum, check_fields, global_shape, pixel, positive
+from petgap.parallel.collective import global_sums
+from petgap.analysis._slabs import check_fields, global_shape, pixel, positive
 from petgap.analysis.contact_geometry import contact_mask, resolve_gap_tolerance
 
 
@@ -75,7 +76,7 @@ def attractive_force_measured(grid, gap, v_prime, pressure=None, *, gap_toleranc
         local = [float(np.sum(stress)), float(np.sum(stress[contact]))]
     else:
         local = [float(np.sum(stress)), math.nan]
-    total = allreduce_sum(grid.comm, local)
+    total = global_sums(grid.comm, local)
     dx, dy = pixel(grid)
     nx, ny = global_shape(grid)
     force = -dx * dy * total[0]

@@ -9,7 +9,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from mpi4py import MPI
 
-from petgap.analysis._slabs import Extended, allreduce_sum, check_fields, fetch_rows, global_shape, local_rows, pixel, positive
+from petgap.parallel.collective import global_sums
+from petgap.analysis._slabs import Extended, check_fields, fetch_rows, global_shape, local_rows, pixel, positive
 
 
 #: Angle-correction sweeps of the perimeter's crossing points (see :func:`perimeter`).
@@ -304,8 +305,8 @@ def perimeter(grid, gap=None, pressure=None, contact_modulus=None, mask=None, *,
         # raw pixel edges of the owned rows: x-neighbours to the next row, y-neighbours in it
         ex = np.count_nonzero(mask != inside[halo + 1:halo + nloc + 1])
         ey = np.count_nonzero(mask != np.roll(mask, -1, axis=1))
-    total = allreduce_sum(grid.comm, [length, counts[0], counts[1]])
-    edges = allreduce_sum(grid.comm, [ex, ey], dtype=np.int64)
+    total = global_sums(grid.comm, [length, counts[0], counts[1]])
+    edges = global_sums(grid.comm, [ex, ey], dtype=np.int64)
     return PerimeterResult(perimeter=float(total[0]), pixel_edges=int(edges.sum()),
                            pixel_edge_length=float(edges[0] * dy + edges[1] * dx),
                            segments=int(round(total[1])), saddles=int(round(total[2])),
@@ -540,7 +541,7 @@ def contact_statistics(grid, gap, pressure, rms_slope, contact_modulus, *, gap_t
     mask = contact_mask(gap, pressure, resolve_gap_tolerance(grid, gap, gap_tolerance))
     per = perimeter(grid, gap, pressure, contact_modulus, mask=mask, sweeps=sweeps)
     local = [np.count_nonzero(mask), float(np.sum(pressure[mask])), float(np.sum(pressure))]
-    total = allreduce_sum(grid.comm, local)
+    total = global_sums(grid.comm, local)
     nx, ny = global_shape(grid)
     dx, dy = pixel(grid)
     npix = int(round(total[0]))

@@ -9,7 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
-from petgap.analysis._slabs import allreduce_sum, check_fields, global_shape, positive
+from petgap.parallel.collective import global_sums
+from petgap.analysis._slabs import check_fields, global_shape, positive
 from petgap.analysis.contact_geometry import contact_mask, resolve_gap_tolerance
 
 
@@ -110,7 +111,7 @@ def gap_distribution(grid, gap, pressure, bins=None, gmin=None, gmax=None, *,
     contact = contact_mask(gap, pressure, gap_tolerance)
     positive = ~contact & (gap > gap_tolerance)
     g = gap[positive]
-    counts0 = allreduce_sum(comm, [np.count_nonzero(contact), g.size], dtype=np.int64)
+    counts0 = global_sums(comm, [np.count_nonzero(contact), g.size], dtype=np.int64)
     nx, ny = global_shape(grid)
     n = nx * ny
     n_contact, n_pos = int(counts0[0]), int(counts0[1])
@@ -129,7 +130,7 @@ def gap_distribution(grid, gap, pressure, bins=None, gmin=None, gmax=None, *,
     local_counts, _ = np.histogram(g, bins=edges)
     local = np.concatenate([local_counts, [np.count_nonzero(g < edges[0]),
                                            np.count_nonzero(g > edges[-1])]])
-    total = allreduce_sum(comm, local, dtype=np.int64)
+    total = global_sums(comm, local, dtype=np.int64)
     counts, below, above = total[:-2], int(total[-2]), int(total[-1])
     widths = np.diff(edges)
     density = counts / (n_nc * widths) if n_nc > 0 else np.full(widths.shape, np.nan)
@@ -641,7 +642,7 @@ def near_contact_area(grid, gap, pressure, gc, c=None, g0=None, *, gap_tolerance
     contact = contact_mask(gap, pressure, gap_tolerance)
     g = np.sort(gap[~contact & (gap > gap_tolerance)])
     local = np.concatenate([[np.count_nonzero(contact)], np.searchsorted(g, gc, side="left")])
-    total = allreduce_sum(grid.comm, local, dtype=np.int64)
+    total = global_sums(grid.comm, local, dtype=np.int64)
     nx, ny = global_shape(grid)
     n = nx * ny
     c = total[0] / n if c is None else float(c)

@@ -21,10 +21,17 @@ Conventions (see also :mod:`petgap.parallel.grid`)
 Every operation costs one forward and one inverse transform (the energy only a
 forward one) and one fused pass over the Fourier slab; inputs are never modified
 and the grid's FFT buffers are used as scratch.
+
+The half-space counts its own applications of ``K`` or ``K^{-1}``
+(:attr:`ElasticHalfSpace.applications`; the energies, a forward transform
+each, are not applications) and runs each inside the PETSc log event
+:data:`petgap.parallel.log.OPERATOR_EVENT`, so that solvers report the count
+without keeping it themselves and ``-log_view`` shows the operator's time.
 """
 import numpy as np
 
 from petgap.parallel._fftw_mpi import weighted_power
+from petgap.parallel.log import OPERATOR_EVENT, event
 
 
 class ElasticHalfSpace:
@@ -49,15 +56,30 @@ class ElasticHalfSpace:
         self._stiffness = contact_modulus / (2.0 * n)
         self._compliance = 2.0 / (contact_modulus * n)
         self._point_stiffness = None  # computed on first use (collective)
+        self._applications = 0
+
+    @property
+    def applications(self):
+        """Applications of ``K`` or ``K^{-1}`` (dense or sparse) so far, on this rank.
+
+        Every rank applies the operator together, so the count is the same on
+        all; a solver reports its difference over the solve.
+        """
+        return self._applications
 
     def _apply(self, field, scale, power, out):
         grid = self.grid
         np.copyto(grid.real, field)
-        grid.convolve_qpower(scale, power)
+        self._convolve(scale, power)
         if out is None:
             return grid.real.copy()
         np.copyto(out, grid.real)
         return out
+
+    def _convolve(self, scale, power):
+        self._applications += 1
+        with event(OPERATOR_EVENT):
+            return self.grid.convolve_qpower(scale, power)
 
     def apply_in_buffer(self, inverse=False):
         """Apply ``K`` (or ``K^{-1}``) to the field already in ``grid.real``, in place.
@@ -66,8 +88,8 @@ class ElasticHalfSpace:
         read the result straight from it: no copies in or out.
         """
         if inverse:
-            return self.grid.convolve_qpower(self._compliance, -1)
-        return self.grid.convolve_qpower(self._stiffness, 1)
+            return self._convolve(self._compliance, -1)
+        return self._convolve(self._stiffness, 1)
 
     def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None):
         """Apply ``K`` (or ``K^{-1}``) to a field given on a set of points only.
@@ -79,10 +101,10 @@ class ElasticHalfSpace:
         ``pidx`` to ``gathered``.  Same operator as :meth:`apply_in_buffer`
         without its slab-sized fill and, gathered, its slab-sized output.
         """
-        if inverse:
-            self.grid.convolve_qpower_sparse(pidx, values, self._compliance, -1, out, gathered)
-        else:
-            self.grid.convolve_qpower_sparse(pidx, values, self._stiffness, 1, out, gathered)
+        scale, power = (self._compliance, -1) if inverse else (self._stiffness, 1)
+        self._applications += 1
+        with event(OPERATOR_EVENT):
+            self.grid.convolve_qpower_sparse(pidx, values, scale, power, out, gathered)
 
     def pressure(self, displacement, out=None):
         """Zero-mean pressure ``p = K u`` that holds the displacement ``u``.

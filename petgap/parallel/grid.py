@@ -93,9 +93,12 @@ class Grid:
         # FFT buffers: the padded real slab and the transposed Fourier slab.
         self._real_storage = _aligned_empty(2 * alloc, np.float64)
         self._fourier_storage = _aligned_empty(alloc, np.complex128)
-        self._padded = self._real_storage[:ln0 * 2 * self.nky].reshape(ln0, 2 * self.nky)
+        #: The real-space FFT buffer in FFTW's padded r2c layout, ``(nx_local,
+        #: 2 (ny // 2 + 1))``: kernels that fill or read the buffer in a pass of
+        #: their own, and the flat indices of :meth:`convolve_qpower_sparse`, use it.
+        self.padded = self._real_storage[:ln0 * 2 * self.nky].reshape(ln0, 2 * self.nky)
         #: Real-space FFT buffer, ``(nx_local, ny)`` view of the padded slab.
-        self.real = self._padded[:, :ny]
+        self.real = self.padded[:, :ny]
         #: Fourier-space FFT buffer, ``(nky_local, nx)``.
         self.fourier = self._fourier_storage[:ln1 * nx].reshape(ln1, nx)
 
@@ -208,7 +211,7 @@ class Grid:
         For fields a solver keeps in the padded layout so that transforms can
         write them directly (``out`` of :meth:`convolve_qpower_sparse`).
         """
-        padded = self._padded
+        padded = self.padded
         array = _aligned_empty(padded.size, np.float64).reshape(padded.shape)
         array[...] = 0.0
         return array

@@ -1,4 +1,4 @@
-"""A coarse-grid start for the pressure solver: solve a blurred copy of the problem first.
+"""The coarse grid of the pressure solver's start: a blurred copy of the problem.
 
 Why: from a uniform pressure, Polonsky-Keer spends its first iterations on a
 contact set of most of the points (about 60 % after the first step on rough
@@ -9,12 +9,13 @@ answer of the same contact on a grid ``f`` times coarser -- the topography
 averaged over ``f x f`` blocks, the same cell, modulus and control -- is such a
 start, and costs ``1/f^2`` per iteration.  Its pressure, repeated over each
 block, starts the fine solve with the set already at the contact fraction of
-the answer.  Measured (H = 0.8, lambda_min = 32 a0, P0 = 0.002 E*, two seeds,
-docs/benchmarks.md): 31-32 / 41-46 / 53-57 iterations from the uniform
-pressure at 512^2 / 1024^2 / 2048^2 become 20 / 25-32 / 35-36, in 0.55-0.65
-of the time, the coarse levels included.  The coarse problem is solved the
-same way, so large grids descend through several levels (1024^2: 256^2,
-64^2, 32^2).
+the answer, which takes a third or more of the iterations off a cold solve
+(docs/benchmarks.md has the current figures).  The coarse problem is solved
+the same way (:func:`petgap.solvers.pressure_cg.coarse_start_pressure` drives it), so
+large grids descend through several levels (1024^2: 256^2, 64^2, 32^2).
+
+This module holds the coarse problem and the transfers between the grids
+only; it does not solve, so the solver may import it without a cycle.
 
 Conventions
 -----------
@@ -61,26 +62,26 @@ def coarsening_factor(shape):
 def coarse_problem(problem):
     """The block-averaged problem on the coarse grid, made once and kept; None if none.
 
-    Collective.  Kept on ``problem`` (``ContactProblem._coarse``) so that the
-    steps of a sweep share it; about ``1/f^2`` of the fine problem's memory.
+    Collective.  Kept by ``problem`` (:meth:`~petgap.mechanics.problem.ContactProblem.derived`)
+    so that the steps of a sweep share it; about ``1/f^2`` of the fine
+    problem's memory.
     """
-    if problem._coarse is not False:
-        return problem._coarse
+    return problem.derived("coarse problem", lambda: _make_coarse_problem(problem))
+
+
+def _make_coarse_problem(problem):
     grid = problem.grid
     f = coarsening_factor(grid.shape)
-    coarse = None
-    if f is not None:
-        try:
-            cgrid = Grid((grid.nx // f, grid.ny // f), size=(grid.Lx, grid.Ly), comm=grid.comm,
-                         planner=grid.planner, wisdom=grid.wisdom)
-        except DecompositionError:
-            cgrid = None  # too few coarse rows for this many ranks: no coarse start
-        if cgrid is not None:
-            h = restrict(grid, cgrid, problem.topography, f)
-            coarse = ContactProblem(cgrid, h, ElasticHalfSpace(
-                cgrid, problem.half_space.contact_modulus), problem.interaction)
-    problem._coarse = coarse
-    return coarse
+    if f is None:
+        return None
+    try:
+        cgrid = Grid((grid.nx // f, grid.ny // f), size=(grid.Lx, grid.Ly), comm=grid.comm,
+                     planner=grid.planner, wisdom=grid.wisdom)
+    except DecompositionError:
+        return None  # too few coarse rows for this many ranks: no coarse start
+    h = restrict(grid, cgrid, problem.topography, f)
+    return ContactProblem(cgrid, h, ElasticHalfSpace(cgrid, problem.half_space.contact_modulus),
+                          problem.interaction)
 
 
 def restrict(grid, coarse, field, f):
@@ -141,27 +142,3 @@ def _move_rows(comm, block, first, lo, hi):
                    [received, (recv_counts, recv_offsets), MPI.DOUBLE])
     return [(start, received[offset:offset + rows * width].reshape(rows, width))
             for (start, rows), offset in zip(pieces, recv_offsets) if rows]
-
-
-def coarse_start(problem, control, tolerance, max_iterations):
-    """The fine-grid pressure to start from, and a line saying how it was found.
-
-    Returns ``(None, "")`` when the grid is not coarsened (the caller's own
-    cold start applies) or the coarse solve produced NaN.  Collective.
-    """
-    from petgap.solvers.pressure_cg import polonsky_keer  # which imports this module
-
-    coarse = coarse_problem(problem)
-    if coarse is None:
-        return None, ""
-    solution = polonsky_keer(coarse, control, tolerance=max(tolerance, COARSE_TOLERANCE),
-                             max_iterations=max_iterations)
-    pressure = solution.pressure
-    finite = problem.grid.comm.allreduce(bool(np.isfinite(pressure).all()), op=MPI.LAND)
-    description = (f"coarse {coarse.grid.nx}x{coarse.grid.ny}: {solution.iterations} "
-                   f"iterations, {solution.reason}"
-                   + (f"; {solution.start}" if solution.start.startswith("coarse") else ""))
-    if not finite:
-        return None, description + " (NaN: not used)"
-    factor = problem.grid.nx // coarse.grid.nx
-    return prolong(coarse.grid, problem.grid, pressure, factor), description

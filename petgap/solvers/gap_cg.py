@@ -87,14 +87,17 @@ evaluated ``p_el``.
 import numpy as np
 from mpi4py import MPI
 
+from petgap.mechanics.problem import Load, MeanGap
+from petgap.parallel.collective import global_sums
+from petgap.parallel.log import GAP_CG_EVENT, event
 from petgap.solvers import _kernels as _k
-from petgap.mechanics.problem import Load, MeanGap, Timer, judge
+from petgap.solvers.convergence import Timer, judge
 
 
-def _sums(comm, *values):
-    buf = np.array(values, dtype=float)
-    comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
-    return buf
+def _pass(kernel, *args):
+    """``kernel(*args)``, timed in the PETSc log event of the gap solver's passes."""
+    with event(GAP_CG_EVENT):
+        return kernel(*args)
 
 
 def _project_mean(grid, g, target, h, padded, comm):
@@ -116,18 +119,18 @@ def _project_mean(grid, g, target, h, padded, comm):
     n = grid.npoints
     mu = target - grid.mean(g)
     # start to the right of the root: the mean of max(., 0) is at least the mean
-    s, count = _sums(comm, *_k.shifted_positive_sums(g, mu))
+    s, count = global_sums(comm, *_pass(_k.shifted_positive_sums, g, mu))
     for _ in range(100):
         excess = s / n - target
         if abs(excess) <= 1e-14 * max(abs(target), 1e-300) or count == 0:
             break
         mu -= excess * n / count
-        s_new, count = _sums(comm, *_k.shifted_positive_sums(g, mu))
+        s_new, count = global_sums(comm, *_pass(_k.shifted_positive_sums, g, mu))
         if s_new / n - target >= excess and excess > 0:  # no progress: converged to round-off
             s = s_new
             break
         s = s_new
-    _k.project_and_load(g, mu, h, padded)
+    _pass(_k.project_and_load, g, mu, h, padded)
 
 
 def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_gap=None,
@@ -156,7 +159,7 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
     grid, comm = problem.grid, problem.grid.comm
     h = problem.topography
     half_space = problem.half_space
-    padded = grid._padded
+    padded = grid.padded
     timer = Timer()
     n = grid.npoints
     interaction = problem.interaction
@@ -200,8 +203,7 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
 
     def fresh_pressure():
         half_space.apply_in_buffer(inverse=False)
-        problem.operator_applications += 1
-        _k.copy_from(pel, padded)
+        _pass(_k.copy_from, pel, padded)
 
     fresh_pressure()
     fresh, since_fresh = True, 0
@@ -212,18 +214,18 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
     lam_f = lam if load else 0.0
     for it in range(max_iterations + 1):
         if adh:
-            _k.gcg_interaction(g, vp, w, rho)
+            _pass(_k.gcg_interaction, g, vp, w, rho)
         if not load:
-            s_open, n_open = _sums(comm, *_k.gcg_open_sums(pel, g, vp, adh))
+            s_open, n_open = global_sums(comm, *_pass(_k.gcg_open_sums, pel, g, vp, adh))
             lam_f = -s_open / n_open if n_open > 0 else 0.0
-        s_free, n_free, gmax, gmin = _k.gcg_free_sums(pel, g, vp, adh, lam_f)
-        s_free, n_free = _sums(comm, s_free, n_free)
+        s_free, n_free, gmax, gmin = _pass(_k.gcg_free_sums, pel, g, vp, adh, lam_f)
+        s_free, n_free = global_sums(comm, s_free, n_free)
         if beta_ok and not load and n_free > n_open:
             # points at the wall joined F: restart if one is pulled off it by half the
             # last residual or more (module docstring).  One more pass, in the few
             # iterations that would go on with points at the wall in F.
             pull = 0.5 * history[-1] * problem.pressure_scale
-            strong = _k.gcg_free_sums(pel, g, vp, adh, lam_f + pull)[1]
+            strong = _pass(_k.gcg_free_sums, pel, g, vp, adh, lam_f + pull)[1]
             beta_ok = comm.allreduce(strong, op=MPI.SUM) == n_open
         ext = np.array([gmax, -gmin])
         comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
@@ -244,10 +246,10 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
             break
 
         # preconditioned residual z = P_F K^{-1} P_F r (one pair)
-        _k.gcg_write_residual(pel, g, vp, adh, lam_f, lam, padded)
+        _pass(_k.gcg_write_residual, pel, g, vp, adh, lam_f, lam, padded)
         half_space.apply_in_buffer(inverse=True)
-        problem.operator_applications += 1
-        sum_z, rz, sum_r = _sums(comm, *_k.gcg_precond_sums(padded, pel, g, vp, adh, lam_f, lam))
+        sum_z, rz, sum_r = global_sums(
+            comm, *_pass(_k.gcg_precond_sums, padded, pel, g, vp, adh, lam_f, lam))
         if load:
             # mean mode: z += c mean(r) on F, i.e. a shift of -c sum_r / n
             zshift = -mean_mode * sum_r / n
@@ -256,14 +258,13 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
             zshift = sum_z / n_free
         beta = rz / rz_old if beta_ok else 0.0
         rz_old = rz
-        _k.gcg_direction(padded, pel, g, vp, adh, t, lam_f, zshift, beta)
+        _pass(_k.gcg_direction, padded, pel, g, vp, adh, t, lam_f, zshift, beta)
 
         # curvature along t (one pair): K t lands in the buffer
         half_space.apply_in_buffer(inverse=False)
-        problem.operator_applications += 1
-        curv, slope, tmax, reach = _k.gcg_curvature(padded, t, pel, g, vp, adh,
+        curv, slope, tmax, reach = _pass(_k.gcg_curvature, padded, t, pel, g, vp, adh,
                                                     lam if load else 0.0, rho)
-        curv, slope = _sums(comm, curv, slope)
+        curv, slope = global_sums(comm, curv, slope)
         tmax = comm.allreduce(tmax, op=MPI.MAX)
         if not slope < 0:
             # not a descent direction (round-off or non-convexity): restart
@@ -283,7 +284,7 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
         else:
             negative_curvature += 1
             tau = rho / tmax if tmax > 0 else 0.0
-        negative = comm.allreduce(_k.gcg_step(g, t, tau), op=MPI.SUM)
+        negative = comm.allreduce(_pass(_k.gcg_step, g, t, tau), op=MPI.SUM)
         if negative > 0 or curv <= 0 or capped or since_fresh >= refresh_interval:
             # the projection acts: new free set, fresh elastic pressure, restart
             if load:
@@ -295,7 +296,7 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
             fresh, since_fresh = True, 0
             beta_ok = negative == 0 and curv > 0 and not capped
         else:
-            _k.axpy(pel, padded, tau)
+            _pass(_k.axpy, pel, padded, tau)
             fresh = False
             since_fresh += 1
             beta_ok = True

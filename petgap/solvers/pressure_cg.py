@@ -36,7 +36,7 @@ cannot accumulate into the answer.
 
 The contact set is stored as sorted index lists, with the pressure, the
 conjugate direction, the gap and the preconditioned gap kept on it only
-(:mod:`petgap.solvers.contact_set`, kernels in ``petgap/_contact_set.pyx``), and the
+(:mod:`petgap.solvers.contact_set`, kernels in ``petgap/solvers/_contact_set.pyx``), and the
 transforms take their input from those lists and, for ``P_S K P_S g``, give
 their output back on them (:meth:`petgap.mechanics.half_space.ElasticHalfSpace.apply_sparse`):
 at a few percent contact an iteration then streams the slab through memory
@@ -65,16 +65,13 @@ zero by construction: ``p >= 0`` and ``p = 0`` off ``S``).
 import numpy as np
 from mpi4py import MPI
 
+from petgap.mechanics.problem import Load, MeanGap
+from petgap.parallel.collective import global_sums
+from petgap.parallel.log import GAP_PASS_EVENT, SET_UPDATE_EVENT, event
 from petgap.solvers import _contact_set as _cs
 from petgap.solvers import coarse
-from petgap.mechanics.problem import Load, MeanGap, Timer, judge
 from petgap.solvers.contact_set import INDEX, ContactSet
-
-
-def _sums(comm, *values):
-    buf = np.array(values, dtype=float)
-    comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
-    return buf
+from petgap.solvers.convergence import Timer, judge
 
 
 def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
@@ -131,17 +128,16 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
 
     start = "warm" if initial_pressure is not None else ""
     if initial_pressure is None and coarse_start:
-        initial_pressure, start = coarse.coarse_start(problem, control, tolerance,
-                                                      max_iterations)
+        initial_pressure, start = coarse_start_pressure(problem, control, tolerance, max_iterations)
     start_time = timer()
     if initial_pressure is None:
         start = "; ".join(filter(None, [
             start, "uniform pressure" if load else "overlap of the undeformed surfaces"]))
     start_ops = problem.operator_applications
     # The contact set S = {p > 0} as sorted index lists, with p and the
-    # conjugate direction t stored on S only (see petgap/contact_set.py).
+    # conjugate direction t stored on S only (see petgap/solvers/contact_set.py).
     mask = np.zeros(grid.local_shape, dtype=np.uint8)
-    padded = grid._padded
+    padded = grid.padded
     padded_width = padded.shape[1]
     offset = problem.mean_height + target if not load else 0.0
     if initial_pressure is not None or not load:
@@ -155,7 +151,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         contact = ContactSet.from_pressure(mask, padded_width, p)
         del p
         if load:
-            total = _sums(comm, contact.p.sum())[0]
+            total = global_sums(comm, contact.p.sum())[0]
             if total > 0:
                 contact.p[...] *= target * n / total
             else:
@@ -203,17 +199,19 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                 pS *= scale
                 scale = 1.0
             half_space.apply_sparse(pidx, pS, inverse=True, out=u)
-            problem.operator_applications += 1
             since_fresh = 0
         else:
             since_fresh += 1
-        n_contact, sum_g = _sums(comm, len(idx), _cs.gather_gap(u, pidx, h, idx, offset, gS))
+        with event(GAP_PASS_EVENT):
+            sum_g = _cs.gather_gap(u, pidx, h, idx, offset, gS)
+        n_contact, sum_g = global_sums(comm, len(idx), sum_g)
         shift = sum_g / n_contact if (load and n_contact > 0) else 0.0
-        in_max, g_norm = _cs.shift_and_norms(gS, shift)
-        pen_max, n_over = _cs.gap_pass(u, h, mask, offset - shift, overlap)
-        if n_over > len(overlap):
-            overlap = np.empty(2 * n_over, dtype=INDEX)
-            _cs.collect_overlap(u, h, mask, offset - shift, overlap)
+        with event(GAP_PASS_EVENT):
+            in_max, g_norm = _cs.shift_and_norms(gS, shift)
+            pen_max, n_over = _cs.gap_pass(u, h, mask, offset - shift, overlap)
+            if n_over > len(overlap):
+                overlap = np.empty(2 * n_over, dtype=INDEX)
+                _cs.collect_overlap(u, h, mask, offset - shift, overlap)
         norms = np.array([in_max, pen_max])
         comm.Allreduce(MPI.IN_PLACE, norms, op=MPI.MAX)
         residual = float(norms.max()) / problem.gap_scale
@@ -235,7 +233,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             extra = -g.ravel()[points] * (problem.pressure_scale / problem.gap_scale)
             del g, idx, pidx, pS, tS, gS
             contact.merge(points, extra)
-            scale = target * n / _sums(comm, contact.p.sum())[0] if load else 1.0
+            scale = target * n / global_sums(comm, contact.p.sum())[0] if load else 1.0
             delta, fresh = 0.0, True
             continue
         if preconditioned:
@@ -243,8 +241,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # under load control
             zS = contact.z
             half_space.apply_sparse(pidx, gS, inverse=False, gathered=zS)
-            problem.operator_applications += 1
-            sum_z, gz, g_sq = _sums(comm, *_cs.z_sums(zS, gS), g_norm)
+            sum_z, gz, g_sq = global_sums(comm, *_cs.z_sums(zS, gS), g_norm)
             zshift = sum_z / n_contact if load else 0.0
             # Pressure per unit penetration given to entering points (below):
             # plain Polonsky-Keer steps along the gap, so its step length tau
@@ -256,26 +253,26 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             g_norm = gz
             _cs.direction(zS, zshift, delta * g_norm / g_old, tS)
         else:
-            g_norm = _sums(comm, g_norm)[0]
+            g_norm = global_sums(comm, g_norm)[0]
             stiffness = 1.0
             _cs.direction(gS, 0.0, delta * g_norm / g_old, tS)
         g_old = g_norm
         # The image r = K^{-1} t of the direction: one transform pair, from S
         # to the whole slab (the recurrence below needs r everywhere)
         half_space.apply_sparse(pidx, tS, inverse=True)
-        problem.operator_applications += 1
-        sum_r, sum_gt, sum_rt, sum_t = _sums(comm, *_cs.step_sums(padded, pidx, gS, tS))
+        sum_r, sum_gt, sum_rt, sum_t = global_sums(comm, *_cs.step_sums(padded, pidx, gS, tS))
         if load:
             sum_rt -= sum_r / n_contact * sum_t  # r minus its mean over S
         if not sum_rt > 0:
             reason = "breakdown"
             break
         tau = sum_gt / sum_rt
-        entering, clipped, sum_p = _cs.update(pS, tS, gS, tau, tau * stiffness)
-        added = overlap[:min(n_over, len(overlap))]
-        added_p = np.empty(len(added))
-        sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau * stiffness, added_p)
-        n_overlap, n_clipped, sum_p = _sums(comm, entering + len(added), clipped, sum_p)
+        with event(SET_UPDATE_EVENT):
+            entering, clipped, sum_p = _cs.update(pS, tS, gS, tau, tau * stiffness)
+            added = overlap[:min(n_over, len(overlap))]
+            added_p = np.empty(len(added))
+            sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau * stiffness, added_p)
+        n_overlap, n_clipped, sum_p = global_sums(comm, entering + len(added), clipped, sum_p)
         delta = 0.0 if n_overlap > 0 else 1.0
         scale = target * n / sum_p if load else 1.0
         if clipped or len(added):
@@ -331,10 +328,10 @@ def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, 
     allowed): then the caller runs it the general way.
     """
     grid, comm, h = problem.grid, problem.grid.comm, problem.topography
-    padded = grid._padded
+    padded = grid.padded
     hbar = problem.mean_height
     g_max, g_sq = _cs.uniform_gap(padded, h, hbar)
-    g_sq = _sums(comm, g_sq)[0]
+    g_sq = global_sums(comm, g_sq)[0]
     if not np.isfinite(g_sq):  # decided alike on every rank (a NaN sum is NaN everywhere)
         return None
     residual = comm.allreduce(g_max, op=MPI.MAX) / problem.gap_scale
@@ -343,17 +340,42 @@ def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, 
     if monitor is not None:
         monitor(0, residual)
     problem.half_space.apply_in_buffer(inverse=False)   # z = K g
-    problem.operator_applications += 1
-    sum_z, gz = _sums(comm, *_cs.uniform_sums(padded, h, hbar))
+    sum_z, gz = global_sums(comm, *_cs.uniform_sums(padded, h, hbar))
     zshift = sum_z / grid.npoints
     entry = gz / g_sq  # tau (= 1) times the stiffness's Rayleigh quotient on g
-    n_overlap, _, sum_p = _sums(comm, *_cs.uniform_step(padded, h, hbar, zshift, target,
+    n_overlap, _, sum_p = global_sums(comm, *_cs.uniform_step(padded, h, hbar, zshift, target,
                                                         entry, p))
     # Only shrinking is expected from here: no spare capacity.
     contact = ContactSet.from_pressure(mask, padded_width, p, spare=1.0)
     _cs.direction_from_buffer(padded, contact.pidx, zshift, 0.0, contact.t)
     delta = 0.0 if n_overlap > 0 else 1.0
     return contact, target * grid.npoints / sum_p, delta, gz, residual
+
+
+def coarse_start_pressure(problem, control, tolerance, max_iterations):
+    """A fine-grid pressure to start from: the solution on a coarser grid, prolonged.
+
+    The coarse problem and the transfers are :mod:`petgap.solvers.coarse`'s;
+    the coarse solve is this module's own.  Returns ``(pressure, a line saying
+    how it was found)``, or ``(None, "")`` when the grid is not coarsened (the caller's own
+    cold start applies) or the coarse solve produced NaN.  Collective.
+    """
+    coarse_problem = coarse.coarse_problem(problem)
+    if coarse_problem is None:
+        return None, ""
+    solution = polonsky_keer(coarse_problem, control,
+                             tolerance=max(tolerance, coarse.COARSE_TOLERANCE),
+                             max_iterations=max_iterations)
+    pressure = solution.pressure
+    finite = problem.grid.comm.allreduce(bool(np.isfinite(pressure).all()), op=MPI.LAND)
+    cgrid = coarse_problem.grid
+    description = (f"coarse {cgrid.nx}x{cgrid.ny}: {solution.iterations} "
+                   f"iterations, {solution.reason}"
+                   + (f"; {solution.start}" if solution.start.startswith("coarse") else ""))
+    if not finite:
+        return None, description + " (NaN: not used)"
+    factor = problem.grid.nx // cgrid.nx
+    return coarse.prolong(cgrid, problem.grid, pressure, factor), description
 
 
 def touching_state(problem, control, timer=None):

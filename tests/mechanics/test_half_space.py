@@ -80,7 +80,7 @@ def test_sparse_application_equals_dense(comm, shape):
     grid = Grid(shape, size=(1.3, 0.7), comm=comm, planner="estimate")
     half_space = ElasticHalfSpace(grid, 3.0)
     rng = np.random.default_rng(7 + comm.rank)
-    width = grid._padded.shape[1]
+    width = grid.padded.shape[1]
     mask = rng.random(grid.local_shape) < 0.3
     rows, cols = np.nonzero(mask)
     pidx = (rows * width + cols).astype(np.int32)
@@ -114,10 +114,10 @@ def test_sparse_application_refuses_unsorted_points(comm):
     """A bad index list raises (on its rank, after the collective transposes: no hang)."""
     grid = Grid((16, 12), comm=comm, planner="estimate")
     half_space = ElasticHalfSpace(grid)
-    width = grid._padded.shape[1]
+    width = grid.padded.shape[1]
     pidx = np.array([9 * width + 1, 2], dtype=np.int32)  # row 9 before row 0
     with pytest.raises(ValueError, match="sorted"):
         half_space.apply_sparse(pidx, np.ones(2))
     with pytest.raises(ValueError, match="aligned"):
-        misaligned = np.zeros(grid._padded.size + 1)[1:].reshape(grid._padded.shape)
+        misaligned = np.zeros(grid.padded.size + 1)[1:].reshape(grid.padded.shape)
         half_space.apply_sparse(pidx[1:], np.ones(1), out=misaligned)
