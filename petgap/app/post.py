@@ -332,7 +332,7 @@ def analyse_step(result, index, args, grids, comm, log):
                             f"'rms_slope', 'statistics.rms_slope', "
                             f"'topography.statistics.rms_slope', 'surface.rms_slope', and there "
                             f"is no 'topography' dataset to compute it from")
-        from petgap.surfaces.self_affine import statistics
+        from petgap.surfaces.statistics import statistics
         if tuple(f["topography"].shape) != shape:
             raise PostError(f"{where}: 'topography' has shape {tuple(f['topography'].shape)}, "
                             f"the step's fields {shape}")

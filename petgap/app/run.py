@@ -98,7 +98,7 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
     RunResult
     """
     from petgap.io.results import ResultFile, check_free_space, check_output_path
-    from petgap.surfaces.self_affine import statistics as surface_statistics
+    from petgap.surfaces.statistics import statistics as surface_statistics
     if comm is None:
         from mpi4py import MPI
         comm = MPI.COMM_WORLD
