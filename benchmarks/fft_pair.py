@@ -39,12 +39,13 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 
 
 def worker(n, repeats, warmup):
     """Time petgap's transform pair on an n x n grid; rank 0 prints the median."""
     # Deferred to the worker: the driver process runs no MPI.
-    import numpy as np
     from mpi4py import MPI
 
     from petgap.mechanics.half_space import ElasticHalfSpace

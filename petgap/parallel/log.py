@@ -85,6 +85,7 @@ def configure(comm=None, quiet=False, stdout=None, stderr=None):
         Streams (default ``sys.stdout`` and ``sys.stderr`` at call time).
     """
     if comm is None:
+        # Deferred: importing mpi4py initialises MPI, which nothing here needs at import.
         from mpi4py import MPI
         comm = MPI.COMM_WORLD
     stdout = sys.stdout if stdout is None else stdout

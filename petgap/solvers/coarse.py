@@ -42,8 +42,8 @@ from petgap.parallel.grid import DecompositionError, Grid
 #: Smallest side of a coarse grid, in points (below it the uniform start is cheap).
 MIN_SIDE = 32
 #: Coarse solves stop here (or at the fine tolerance if that is looser): a
-#: start needs no more.  Coarse tolerances from 1e-2 to 1e-6 left the fine
-#: solve's iterations within +-2 of each other at 512^2-2048^2 (two seeds each).
+#: start needs no more; the fine solve's iterations hardly depend on it between
+#: 1e-2 and 1e-6.
 COARSE_TOLERANCE = 1e-4
 
 

@@ -56,29 +56,22 @@ iterations.  So the iteration restarts when a point at the wall is pulled off
 it by at least half the last residual (``grad + P0 < -r / 2`` at ``g = 0``,
 ``r`` the last ``max_F |grad + P0|``, ``P0`` estimated over the points off
 the wall): a point that will dominate the new residual.  Weaker releases (the
-edges of rough contacts, a pixel or two per step) are left to the recurrence,
-as before: restarting on every change of ``F`` cost rough surfaces up to
-15 %, and changed, by round-off, the path of a sticky solve on 1 and 2 ranks
+edges of rough contacts, a pixel or two per step) are left to the recurrence:
+restarting on every change of ``F`` costs rough surfaces iterations, and lets
+round-off decide the path of a sticky solve differently on 1 and 2 ranks
 (``test_two_ranks_equal_one_with_adhesion``).  Counting the strong pulls costs
-one more pass over the slab (up to half a transform pair at 1024^2), made
-only when the recurrence would go on with points at the wall in ``F``: in
-2-7 % of the iterations on rough surfaces, a quarter on Johnson's wave below.
+one more pass over the slab, made only when the recurrence would go on with
+points at the wall in ``F``: a few percent of the iterations on rough
+surfaces, more on Johnson's wave.
 Mean-gap control only: load control, which :func:`petgap.solvers.dispatch.solve` gives
 this solver for the hard wall alone, has no count of the points off the wall
 to compare with, and hard-wall edges have no crack tip to crawl.
 
-Measured on Johnson's wave (``tests/test_adhesion.py``: 2048 pixels per
-wavelength, ``alpha = 0.3``, ``l_pz = 4 a0``, tolerance 1e-6) in warm-started
-mean-gap steps of 0.05 ``h_a`` between 0.2 and 1.2 ``h_a``, each moving the
-edges by ~20 pixels: unloading 6140 iterations in all (168-900 per step)
-before, 1000 (32-125) after; loading 961 (one step of 452) before, 554 (3-51)
-after; cold solves 681 before, 690 after.  Unloading past pull-off (1.35 to
-1.4 ``h_a``) did not converge in 5000 iterations before, and takes 93 now.
-Mean-gap sweeps on self-affine surfaces at 256^2 and 512^2 (H = 0.8, ``rho``
-from ``a0 / 4`` to ``4 a0``, hard wall too; 11 sweeps of 9 steps) take -8 % to
-+6 % iterations per sweep (-0.3 % in all) and end in the same states; 60
-sticky solves (``rho = a0 / 4``, 30 surfaces, both controls) take as many
-iterations on 1 rank as on 2, as before.
+This is what lets warm-started mean-gap sweeps of Johnson's wave
+(``tests/solvers/test_adhesion.py``) move their edges by tens of pixels per
+step in tens of iterations, and unload past pull-off at all, while sweeps on
+self-affine surfaces take the iterations and end in the states a restart on
+every change of ``F`` would.
 
 Convergence: the largest ``|grad + P0|`` over ``F`` relative to ``h0' E*``
 (:meth:`petgap.mechanics.problem.ContactProblem.kkt_residuals`), judged on a freshly

@@ -46,16 +46,16 @@ between iterations, in the padded layout the transform writes it in; the gap
 ``g = u - h + d`` is recomputed where it is needed.
 
 Cold start: from the solution on a grid 2 or 4 times coarser where the
-grid's shape allows (:mod:`petgap.solvers.coarse`; about half the time at 512^2 and
-1024^2), otherwise, under load control, from a uniform pressure.  The
+grid's shape allows (:mod:`petgap.solvers.coarse`, driven by
+:func:`coarse_start_pressure`), otherwise, under load control, from a uniform pressure.  The
 uniform start's first iteration has a closed form
 (:func:`_uniform_first_iteration`: one transform instead of three, and no
 set of every point), after which about 60 % of the points are in S on rough
 surfaces; the set shrinks from there by some 20 % per iteration, updated in
 place, so its peak is one copy of that first set (32 bytes per point of it).
 A start nearer the answer built from the geometry alone (the rigid approach
-carrying the load) saved 5-15 % of the iterations but did not converge on
-some surfaces (see the comment in :func:`polonsky_keer`).
+carrying the load) saves a few iterations where it works but does not
+converge on some surfaces (see the comment in :func:`polonsky_keer`).
 
 Convergence is judged at the start of an iteration, on the pair ``(p, g)`` the
 iteration starts from, by the gap residual of
@@ -163,8 +163,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         # stiffness overshoots the long wavelengths (the compliance 2 / (E* q)
         # is large there), so the first displacement makes whole valleys
         # penetrate; their entering pressures, rescaled to the load, then crush
-        # the summits, and the set oscillated at 20-60 % of the points without
-        # converging (seen at 1024^2 and 8192^2).
+        # the summits, and the set can oscillate at 20-60 % of the points
+        # without converging.
         contact = None
     overlap = np.empty(max(1024, n // (100 * comm.size)), dtype=INDEX)
     # u = K^{-1} p, kept in the padded layout so that the transform writes it

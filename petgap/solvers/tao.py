@@ -105,9 +105,9 @@ class DimensionlessGap:
     to the bound), the bounds on BNCG's scaling (``delta_min``,
     ``delta_max``), the initial scaling of the quasi-Newton Hessians.  Given
     the gap in metres and the energy in joules these constants mean something
-    different in every unit system and on every grid, and so did the
-    iterations: the same dimensionless problem (128^2, load control) took 179
-    BNCG iterations in one unit system and did not converge in 3000 in another.
+    different in every unit system and on every grid, and so would the
+    iterations: the same dimensionless problem in two unit systems could
+    converge in one and not in the other.
 
     Here the variable is the gap in units of the rms height ``h0``
     (:attr:`~petgap.mechanics.problem.ContactProblem.gap_scale`), and the energy is
@@ -268,14 +268,12 @@ def solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance, max_iter
     """Mean-gap control for gap-space TAO types: secant on log(P0) until mean(g) = g_bar.
 
     Inexact: each inner load-control solve is only as accurate as the step it
-    serves (:func:`_inner_tolerance`).  A fixed inner tolerance of
-    ``tolerance / 100`` spent the whole iteration budget of a step on its first
-    inner solve, at a guessed ``P0`` that the secant would have replaced: TAO's
-    line searches compare energies, whose round-off hides the decrease of a
-    step once the KKT residual is below about ``1e-9`` at 128^2, so ``1e-10``
-    was out of reach (BLMVM, ``g_bar = h0``, tolerance 1e-8: 3000 iterations,
-    the best residual 3e-10, without leaving ``P0 = 0.01 h0' E*``; now 5 outer
-    steps and about 1000 iterations).  Every constant here is in the problem's
+    serves (:func:`_inner_tolerance`).  Why not a fixed inner tolerance well
+    below the outer one: TAO's line searches compare energies, whose round-off
+    hides the decrease of a step once the KKT residual is below about ``1e-9``
+    at 128^2, so a fixed ``tolerance / 100`` is out of reach and would spend
+    the whole iteration budget of a step on its first inner solve, at a guessed
+    ``P0`` that the secant would replace anyway.  Every constant here is in the problem's
     scales (``h0``, ``h0' E*``), so the iterations are the same in every unit
     system.
     """

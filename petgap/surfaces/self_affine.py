@@ -128,8 +128,8 @@ def self_affine(grid, hurst, lambda_min, lambda_max=None, *, rms_slope=None,
     Notes
     -----
     Memory: nothing beyond the grid's FFT buffers (16 bytes per point) and the
-    returned slab (8 bytes per point); ``benchmarks/surface_memory.py`` measured
-    24.1 bytes per point in all at 4096^2 on 1 and 2 ranks.
+    returned slab (8 bytes per point), 24 bytes per point in all, as
+    ``benchmarks/surface_memory.py`` measures.
     """
     hurst = _check_real("hurst", hurst, lambda v: 0 < v < 1, "0 < hurst < 1")
     lambda_min = _check_positive("lambda_min", lambda_min)

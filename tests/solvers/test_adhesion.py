@@ -499,7 +499,7 @@ def test_johnson_wave_under_load_control(comm):
 
 
 # ------------------------------------------- weak adhesion and the gap distribution
-#: The GUIDE surface at 512^2: H = 0.8, h0' = 0.1, lambda_min = 32 a0, lambda_max = L / 2,
+#: The paper's surface at 512^2: H = 0.8, h0' = 0.1, lambda_min = 32 a0, lambda_max = L / 2,
 #: E* = 1, P0 = 0.002 E*.  Calibration (seed 1, rho = 4 a0, adhesive mean-gap solve at the
 #: non-adhesive mean gap): w = 0.001 -> 1/kappa_att = 0.029, 0.0035 -> 0.101, 0.01 -> 0.28,
 #: 0.02 -> 0.55, 0.035 -> 0.92, 0.038 -> 0.99, 0.05 -> 1.27 (w in E* a0; at 256^2,
