@@ -60,7 +60,7 @@ def worker(args):
     from petgap.mechanics.problem import ContactProblem, Load, MeanGap
     from petsc4py import PETSc
 
-    from petgap.mechanics.half_space import COMPLIANCE_EVENT, STIFFNESS_EVENT
+    from petgap.parallel.log import OPERATOR_EVENT, event
     from petgap.parallel.grid import Grid
     from petgap.mechanics.interactions import ExponentialAdhesion
     from petgap.solvers.dispatch import solve
@@ -81,10 +81,10 @@ def worker(args):
     # Time spent in the elastic operator itself, from its PETSc log events, to
     # split an evaluation's cost into the transform pair and the rest.
     PETSc.Log.begin()
-    events = (STIFFNESS_EVENT, COMPLIANCE_EVENT)
+    operator = event(OPERATOR_EVENT)
 
     def operator_seconds():
-        return sum(event.getPerfInfo()["time"] for event in events)
+        return operator.getPerfInfo()["time"]
     options = {"petgap_coarse_start": "0"} if args.no_coarse else None
     marks = []  # (time, operator seconds, applications) at each iteration's verdict
     start_seconds = operator_seconds()

@@ -18,7 +18,6 @@ import argparse
 import resource
 import time
 
-import numpy as np
 from mpi4py import MPI
 
 from petgap.parallel.grid import Grid

@@ -79,8 +79,8 @@ from petgap.mechanics import (  # noqa: E402
     MeanGap)
 from petgap.parallel import Grid  # noqa: E402
 from petgap.solvers import solve, sweep  # noqa: E402
-from petgap.surfaces import (  # noqa: E402
-    load_topography, radial_psd, save_topography_npy, statistics)
+from petgap.surfaces import load_topography, radial_psd, save_topography_npy  # noqa: E402
+from petgap.surfaces.statistics import statistics  # noqa: E402  (petgap.surfaces keeps the module)
 from petgap.surfaces.self_affine import self_affine  # noqa: E402  (the module's name)
 
 __all__ = [

@@ -522,7 +522,7 @@ def contact_statistics(grid, gap, pressure, rms_slope, contact_modulus, *, gap_t
     grid : petgap.parallel.grid.Grid
     gap, pressure : ndarray, shape ``grid.local_shape``
     rms_slope : float
-        ``h0'`` of the topography (spectral, as :func:`petgap.surfaces.self_affine.statistics`).
+        ``h0'`` of the topography (spectral, as :func:`petgap.surfaces.statistics.statistics`).
     contact_modulus : float
         ``E*``.
     gap_tolerance : float, optional

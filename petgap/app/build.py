@@ -28,7 +28,8 @@ from petgap.mechanics.problem import ContactProblem
 from petgap.parallel.grid import Grid
 from petgap.parallel.log import timed
 from petgap.solvers.sweeps import SweepStep, sweep
-from petgap.surfaces.self_affine import self_affine, statistics as surface_statistics
+from petgap.surfaces.self_affine import self_affine
+from petgap.surfaces.statistics import statistics as surface_statistics
 from petgap.surfaces.topography import load_topography
 
 

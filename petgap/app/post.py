@@ -127,7 +127,7 @@ from petgap.mechanics.interactions import ExponentialAdhesion  # noqa: E402
 from petgap.parallel.collective import root_decides  # noqa: E402
 from petgap.parallel.grid import DecompositionError, Grid  # noqa: E402
 from petgap.parallel.log import configure, report_failure  # noqa: E402
-from petgap.surfaces.self_affine import statistics  # noqa: E402
+from petgap.surfaces.statistics import statistics  # noqa: E402
 from petgap._version import __version__
 
 #: Exit status of a user error.

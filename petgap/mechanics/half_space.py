@@ -22,20 +22,16 @@ Every operation costs one forward and one inverse transform (the energy only a
 forward one) and one fused pass over the Fourier slab; inputs are never modified
 and the grid's FFT buffers are used as scratch.
 
-Each application of ``K`` or ``K^{-1}`` is counted here (:attr:`ElasticHalfSpace.applications`,
-the "FFT pairs" every solution reports) and timed by the PETSc log events
-:data:`STIFFNESS_EVENT` and :data:`COMPLIANCE_EVENT`, so ``-log_view`` shows the
-operator's share of a run without instrumenting the solvers.
+The half-space counts its own applications of ``K`` or ``K^{-1}``
+(:attr:`ElasticHalfSpace.applications`; the energies, a forward transform
+each, are not applications) and runs each inside the PETSc log event
+:data:`petgap.parallel.log.OPERATOR_EVENT`, so that solvers report the count
+without keeping it themselves and ``-log_view`` shows the operator's time.
 """
 import numpy as np
-from petsc4py import PETSc
 
 from petgap.parallel._fftw_mpi import weighted_power
-
-#: PETSc log event of ``p = K u`` (one transform pair).
-STIFFNESS_EVENT = PETSc.Log.Event("petgap: K u")
-#: PETSc log event of ``u = K^{-1} p`` (one transform pair).
-COMPLIANCE_EVENT = PETSc.Log.Event("petgap: K^-1 p")
+from petgap.parallel.log import OPERATOR_EVENT, event
 
 
 class ElasticHalfSpace:
@@ -60,25 +56,30 @@ class ElasticHalfSpace:
         self._stiffness = contact_modulus / (2.0 * n)
         self._compliance = 2.0 / (contact_modulus * n)
         self._point_stiffness = None  # computed on first use (collective)
-        #: Applications of ``K`` or ``K^{-1}`` so far (transform pairs); solvers
-        #: report the difference over a solve.
-        self.applications = 0
+        self._applications = 0
 
-    def _event(self, inverse):
-        self.applications += 1
-        return COMPLIANCE_EVENT if inverse else STIFFNESS_EVENT
+    @property
+    def applications(self):
+        """Applications of ``K`` or ``K^{-1}`` (dense or sparse) so far, on this rank.
 
-    def _factor(self, inverse):
-        return (self._compliance, -1) if inverse else (self._stiffness, 1)
+        Every rank applies the operator together, so the count is the same on
+        all; a solver reports its difference over the solve.
+        """
+        return self._applications
 
-    def _apply(self, field, inverse, out):
+    def _apply(self, field, scale, power, out):
         grid = self.grid
         np.copyto(grid.real, field)
-        self.apply_in_buffer(inverse)
+        self._convolve(scale, power)
         if out is None:
             return grid.real.copy()
         np.copyto(out, grid.real)
         return out
+
+    def _convolve(self, scale, power):
+        self._applications += 1
+        with event(OPERATOR_EVENT):
+            return self.grid.convolve_qpower(scale, power)
 
     def apply_in_buffer(self, inverse=False):
         """Apply ``K`` (or ``K^{-1}``) to the field already in ``grid.real``, in place.
@@ -86,12 +87,9 @@ class ElasticHalfSpace:
         For solvers that fill the FFT buffer in a fused pass of their own and
         read the result straight from it: no copies in or out.
         """
-        event = self._event(inverse)
-        event.begin()
-        try:
-            return self.grid.convolve_qpower(*self._factor(inverse))
-        finally:
-            event.end()
+        if inverse:
+            return self._convolve(self._compliance, -1)
+        return self._convolve(self._stiffness, 1)
 
     def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None):
         """Apply ``K`` (or ``K^{-1}``) to a field given on a set of points only.
@@ -103,12 +101,10 @@ class ElasticHalfSpace:
         ``pidx`` to ``gathered``.  Same operator as :meth:`apply_in_buffer`
         without its slab-sized fill and, gathered, its slab-sized output.
         """
-        event = self._event(inverse)
-        event.begin()
-        try:
-            self.grid.convolve_qpower_sparse(pidx, values, *self._factor(inverse), out, gathered)
-        finally:
-            event.end()
+        scale, power = (self._compliance, -1) if inverse else (self._stiffness, 1)
+        self._applications += 1
+        with event(OPERATOR_EVENT):
+            self.grid.convolve_qpower_sparse(pidx, values, scale, power, out, gathered)
 
     def pressure(self, displacement, out=None):
         """Zero-mean pressure ``p = K u`` that holds the displacement ``u``.
@@ -119,7 +115,7 @@ class ElasticHalfSpace:
         out : ndarray, optional
             Where to write the result (may be ``displacement`` itself).
         """
-        return self._apply(displacement, False, out)
+        return self._apply(displacement, self._stiffness, 1, out)
 
     def displacement(self, pressure, out=None):
         """Zero-mean displacement ``u = K^{-1} p`` under the pressure ``p``.
@@ -127,7 +123,7 @@ class ElasticHalfSpace:
         The mean of ``pressure`` (the q = 0 mode) is ignored: it moves the
         half-space rigidly by an amount the control decides.
         """
-        return self._apply(pressure, True, out)
+        return self._apply(pressure, self._compliance, -1, out)
 
     def point_stiffness(self):
         """The diagonal of ``K``: the pressure at a point per unit displacement of it alone.

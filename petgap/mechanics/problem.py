@@ -23,15 +23,14 @@ KKT conditions: ``p + v'(g) = 0`` where ``g > 0`` and ``p + v'(0) >= 0`` where
 relative to ``h0' E*`` and the largest violation in gap relative to ``h0``.
 """
 import copy
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
 from mpi4py import MPI
 
-from petgap.parallel._fftw_mpi import weighted_power
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.interactions import HardWall
+from petgap.surfaces.statistics import check_local_field, statistics
 
 
 @dataclass(frozen=True)
@@ -137,39 +136,34 @@ class ContactProblem:
     topography : ndarray, shape ``grid.local_shape``
         This rank's slab of the rigid surface heights ``h``.
     half_space : petgap.mechanics.half_space.ElasticHalfSpace, optional
-        The elastic body; made from ``contact_modulus`` when not given.
+        The elastic body; default: one made on ``grid`` with ``contact_modulus``.
     interaction : HardWall or ExponentialAdhesion, optional
         Default: hard wall only.
     contact_modulus : float, optional
-        ``E*`` of the half-space to make when ``half_space`` is not given
-        (default 1); must not be given with ``half_space``.
+        ``E*`` of the half-space made when none is given (default 1); when one
+        is given, its modulus must agree.
     """
 
     def __init__(self, grid, topography, half_space=None, interaction=None, *,
                  contact_modulus=None):
-        if topography.shape != grid.local_shape:
-            raise ValueError(f"topography slab has shape {topography.shape}, "
-                             f"grid expects {grid.local_shape}")
+        # checked on every rank together: a slab of the wrong shape raises everywhere
+        topography = check_local_field(grid, topography, "topography")
         if half_space is None:
             half_space = ElasticHalfSpace(grid, 1.0 if contact_modulus is None
                                           else contact_modulus)
-        elif contact_modulus is not None:
-            raise ValueError("give either half_space or contact_modulus, not both")
+        elif contact_modulus is not None and float(contact_modulus) != half_space.contact_modulus:
+            raise ValueError(f"contact_modulus = {contact_modulus!r} disagrees with the "
+                             f"half-space's {half_space.contact_modulus!r}; give one of them")
         self.grid = grid
         self.half_space = half_space
         self.interaction = interaction or HardWall()
         self.topography = np.ascontiguousarray(topography, dtype=float)
-        self.mean_height = grid.mean(self.topography)
-        # Spectral statistics set the unit-free residual scales.
-        grid.forward(self.topography)
-        comm = grid.comm
-        power0 = comm.allreduce(weighted_power(grid.fourier, grid.qx, grid.qy,
-                                               grid.hermitian_weight, 0))
-        power2 = comm.allreduce(weighted_power(grid.fourier, grid.qx, grid.qy,
-                                               grid.hermitian_weight, 2))
-        n = grid.npoints
-        self.rms_height = float(np.sqrt(max(power0 / n ** 2 - self.mean_height ** 2, 0.0)))
-        self.rms_slope = float(np.sqrt(power2) / n)
+        # The spectral statistics (the surface's own, as reported for it) set the
+        # unit-free residual scales.
+        stats = statistics(grid, self.topography)
+        self.mean_height = stats.mean
+        self.rms_height = stats.rms_height
+        self.rms_slope = stats.rms_slope
         if not (self.rms_height > 0 and self.rms_slope > 0):
             raise ValueError("the topography is flat: contact of a flat surface has no "
                              "rough-contact solution (rms height and slope are zero)")
@@ -177,33 +171,50 @@ class ContactProblem:
         self.pressure_scale = self.rms_slope * half_space.contact_modulus
         #: Gap scale of the KKT residual, ``h0``.
         self.gap_scale = self.rms_height
-        #: What solvers derive from this problem and keep for the steps of a
-        #: sweep (e.g. the coarse-grid problem of :mod:`petgap.solvers.coarse`).
-        self.solver_cache = {}
+        self._derived = {}
 
     @property
     def operator_applications(self):
-        """Applications of ``K`` or ``K^{-1}`` so far (counted by the half-space)."""
+        """Applications of the elastic operator so far (the half-space's own count).
+
+        A solver reports the difference over its solve.
+        """
         return self.half_space.applications
 
     def with_interaction(self, interaction):
-        """The same problem (grid, topography, half-space) with another interaction.
+        """The same surface and half-space with another interaction (None: the hard wall).
 
-        Shares every array and the half-space, so operator applications of
-        either count for both; what solvers cached is not shared (it depends on
-        the interaction).
+        Shares the grid, the topography, the half-space (and so its count of
+        operator applications) and the statistics; nothing derived by
+        :meth:`derived` is shared, since that may depend on the interaction.
         """
         other = copy.copy(self)
-        other.interaction = interaction
-        other.solver_cache = {}
+        other.interaction = interaction or HardWall()
+        other._derived = {}
         return other
+
+    def derived(self, key, make):
+        """``make()``, made on the first call with this ``key`` and kept for later ones.
+
+        For what a solver derives from the problem alone and reuses over the
+        steps of a sweep (the coarse problem of
+        :func:`petgap.solvers.coarse.coarse_problem`).  ``make`` must be
+        collective if it is, and every rank must ask for the same keys.
+        """
+        if key not in self._derived:
+            self._derived[key] = make()
+        return self._derived[key]
 
     # ------------------------------------------------------------ operators
     def elastic_pressure(self, gap, out=None):
         """Zero-mean elastic pressure ``K (g + h)`` (one transform pair)."""
         buf = self.grid.real
         np.add(gap, self.topography, out=buf)
-        return self.half_space.pressure(buf, out)
+        self.half_space.apply_in_buffer()
+        if out is None:
+            return buf.copy()
+        np.copyto(out, buf)
+        return out
 
     def displacement(self, pressure, out=None):
         """Zero-mean displacement ``K^{-1} p`` (one transform pair)."""
@@ -291,7 +302,7 @@ class ContactProblem:
         n = grid.npoints
         area = grid.pixel_area
         mean_gap, mean_pressure, c = total[0] / n, total[1] / n, total[2] / n
-        # Force split (paper Eqs. 1 and 15): F = A0 P0 = F_rep + F_att
+        # Force split (docs/conventions.md; paper Eq. 1 and 15): F = A0 P0 = F_rep + F_att
         # with F_att = -sum dx dy v'(g) (< 0, attractive) and F_rep the wall reaction.
         repulsive_force, attractive_force = area * total[4], -area * total[5]
         a_rep = c * grid.area
@@ -324,43 +335,3 @@ def _blocks(nrows, points=1 << 16, ncols=None):
 
 def _max_or_zero(values):
     return float(values.max()) if values.size else 0.0
-
-
-def judge(residual, tolerance, fresh, iteration, max_iterations, history, monitor):
-    """The verdict of an iterative solver on the residual at the start of an iteration.
-
-    Shared by the conjugate-gradient solvers (:mod:`petgap.solvers.pressure_cg`,
-    :mod:`petgap.solvers.gap_cg`), which update their fields by recurrences between
-    fresh transforms: a converged verdict is only given on a fresh
-    evaluation, so that accumulated round-off never passes for convergence.
-
-    Returns
-    -------
-    str
-        ``"diverged_nan"``; ``"refresh"`` (converged on a recurrence: evaluate
-        afresh and judge again; nothing is recorded); ``"converged_kkt"`` or
-        ``"max_iterations"`` (stop); or ``""`` (carry on).  Except for the first
-        two, the residual is appended to ``history`` and passed to ``monitor``.
-    """
-    if not np.isfinite(residual):
-        return "diverged_nan"
-    if residual <= tolerance and not fresh:
-        return "refresh"
-    history.append(residual)
-    if monitor is not None:
-        monitor(iteration, residual)
-    if residual <= tolerance:
-        return "converged_kkt"
-    if iteration >= max_iterations:
-        return "max_iterations"
-    return ""
-
-
-class Timer:
-    """Wall-clock seconds since construction (``time.perf_counter``)."""
-
-    def __init__(self):
-        self.start = time.perf_counter()
-
-    def __call__(self):
-        return time.perf_counter() - self.start

@@ -93,8 +93,9 @@ class Grid:
         # FFT buffers: the padded real slab and the transposed Fourier slab.
         self._real_storage = _aligned_empty(2 * alloc, np.float64)
         self._fourier_storage = _aligned_empty(alloc, np.complex128)
-        #: Real-space FFT buffer with its r2c padding columns, ``(nx_local, 2 nky)``:
-        #: kernels that fill the buffer in a fused pass write rows of this width.
+        #: The real-space FFT buffer in FFTW's padded r2c layout, ``(nx_local,
+        #: 2 (ny // 2 + 1))``: kernels that fill or read the buffer in a pass of
+        #: their own, and the flat indices of :meth:`convolve_qpower_sparse`, use it.
         self.padded = self._real_storage[:ln0 * 2 * self.nky].reshape(ln0, 2 * self.nky)
         #: Real-space FFT buffer, ``(nx_local, ny)`` view of the padded slab.
         self.real = self.padded[:, :ny]

@@ -12,6 +12,10 @@
   either one clean message (every rank raised) or an abort of the job (only
   some ranks raised, so the others may be waiting in a collective forever).
 
+* :func:`event` names the PETSc log events of petgap's own kernels (the
+  elastic operator, the contact-set kernels, the gap-CG passes), so that
+  ``-log_view`` and ``PETSc.Log.Event.getPerfInfo`` see them beside PETSc's.
+
 Nothing happens at import: call :func:`configure` once (the CLI does).
 """
 import logging
@@ -20,8 +24,6 @@ import sys
 import time
 import traceback
 import warnings
-
-from mpi4py import MPI
 
 LOGGER_NAME = "petgap"
 
@@ -83,6 +85,8 @@ def configure(comm=None, quiet=False, stdout=None, stderr=None):
         Streams (default ``sys.stdout`` and ``sys.stderr`` at call time).
     """
     if comm is None:
+        # Deferred: importing mpi4py initialises MPI, which nothing here needs at import.
+        from mpi4py import MPI
         comm = MPI.COMM_WORLD
     stdout = sys.stdout if stdout is None else stdout
     stderr = sys.stderr if stderr is None else stderr
@@ -208,3 +212,35 @@ def report_failure(exc, comm, failure_comm, clean_types=(ValueError, OSError),
           f"{program}: aborting all ranks", file=stream, flush=True)
     comm.Abort(1)
     return 1  # not reached
+
+
+# ------------------------------------------------------------------ PETSc events
+#: Every application of the elastic operator ``K`` or ``K^{-1}``, dense or sparse
+#: (:class:`petgap.mechanics.half_space.ElasticHalfSpace`); its count is the
+#: solutions' ``operator_applications``.
+OPERATOR_EVENT = "petgap:operator"
+#: The pressure solver's pass over the slab that finds the gap and its penetrations.
+GAP_PASS_EVENT = "petgap:gapPass"
+#: The pressure solver's update of the contact set (projected step, merge).
+SET_UPDATE_EVENT = "petgap:setUpdate"
+#: The gap solver's passes over the slab (sums, direction, step, projection).
+GAP_CG_EVENT = "petgap:gapCG"
+
+_events = {}
+
+
+def event(name):
+    """The PETSc log event ``name``, registered on first use and kept for the process.
+
+    Use as ``with event(OPERATOR_EVENT): ...``; ``-log_view`` lists it, and
+    ``event(name).getPerfInfo()`` gives its count and time once logging is on
+    (``PETSc.Log.begin()``).  Registration is local to the process, not
+    collective.
+    """
+    found = _events.get(name)
+    if found is None:
+        # Deferred: importing petsc4py initialises PETSc, which the modules that
+        # only log messages (post-processing) never need.
+        from petsc4py import PETSc
+        found = _events[name] = PETSc.Log.Event(name)
+    return found

@@ -1,4 +1,4 @@
-"""A coarse-grid start for the pressure solver: solve a blurred copy of the problem first.
+"""The coarse grid of the pressure solver's start: a blurred copy of the problem.
 
 Why: from a uniform pressure, Polonsky-Keer spends its first iterations on a
 contact set of most of the points (about 60 % after the first step on rough
@@ -9,12 +9,13 @@ answer of the same contact on a grid ``f`` times coarser -- the topography
 averaged over ``f x f`` blocks, the same cell, modulus and control -- is such a
 start, and costs ``1/f^2`` per iteration.  Its pressure, repeated over each
 block, starts the fine solve with the set already at the contact fraction of
-the answer.  Measured (H = 0.8, lambda_min = 32 a0, P0 = 0.002 E*, two seeds,
-docs/benchmarks.md): 31-32 / 41-46 / 53-57 iterations from the uniform
-pressure at 512^2 / 1024^2 / 2048^2 become 20 / 25-32 / 35-36, in 0.55-0.65
-of the time, the coarse levels included.  The coarse problem is solved the
-same way, so large grids descend through several levels (1024^2: 256^2,
-64^2, 32^2).
+the answer, which takes a third or more of the iterations off a cold solve
+(docs/benchmarks.md has the current figures).  The coarse problem is solved
+the same way (:func:`petgap.solvers.pressure_cg.coarse_start_pressure` drives it), so
+large grids descend through several levels (1024^2: 256^2, 64^2, 32^2).
+
+This module holds the coarse problem and the transfers between the grids
+only; it does not solve, so the solver may import it without a cycle.
 
 Conventions
 -----------
@@ -35,13 +36,14 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.mechanics.problem import ContactProblem
+from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.parallel.grid import DecompositionError, Grid
 
 #: Smallest side of a coarse grid, in points (below it the uniform start is cheap).
 MIN_SIDE = 32
 #: Coarse solves stop here (or at the fine tolerance if that is looser): a
-#: start needs no more.  Coarse tolerances from 1e-2 to 1e-6 left the fine
-#: solve's iterations within +-2 of each other at 512^2-2048^2 (two seeds each).
+#: start needs no more; the fine solve's iterations hardly depend on it between
+#: 1e-2 and 1e-6.
 COARSE_TOLERANCE = 1e-4
 
 
@@ -60,26 +62,26 @@ def coarsening_factor(shape):
 def coarse_problem(problem):
     """The block-averaged problem on the coarse grid, made once and kept; None if none.
 
-    Collective.  Kept in ``problem.solver_cache`` so that the steps of a sweep
-    share it; about ``1/f^2`` of the fine problem's memory.
+    Collective.  Kept by ``problem`` (:meth:`~petgap.mechanics.problem.ContactProblem.derived`)
+    so that the steps of a sweep share it; about ``1/f^2`` of the fine
+    problem's memory.
     """
-    if "coarse" in problem.solver_cache:
-        return problem.solver_cache["coarse"]
+    return problem.derived("coarse problem", lambda: _make_coarse_problem(problem))
+
+
+def _make_coarse_problem(problem):
     grid = problem.grid
     f = coarsening_factor(grid.shape)
-    coarse = None
-    if f is not None:
-        try:
-            cgrid = Grid((grid.nx // f, grid.ny // f), size=(grid.Lx, grid.Ly), comm=grid.comm,
-                         planner=grid.planner, wisdom=grid.wisdom)
-        except DecompositionError:
-            cgrid = None  # too few coarse rows for this many ranks: no coarse start
-        if cgrid is not None:
-            h = restrict(grid, cgrid, problem.topography, f)
-            coarse = ContactProblem(cgrid, h, interaction=problem.interaction,
-                                    contact_modulus=problem.half_space.contact_modulus)
-    problem.solver_cache["coarse"] = coarse
-    return coarse
+    if f is None:
+        return None
+    try:
+        cgrid = Grid((grid.nx // f, grid.ny // f), size=(grid.Lx, grid.Ly), comm=grid.comm,
+                     planner=grid.planner, wisdom=grid.wisdom)
+    except DecompositionError:
+        return None  # too few coarse rows for this many ranks: no coarse start
+    h = restrict(grid, cgrid, problem.topography, f)
+    return ContactProblem(cgrid, h, ElasticHalfSpace(cgrid, problem.half_space.contact_modulus),
+                          problem.interaction)
 
 
 def restrict(grid, coarse, field, f):

@@ -4,7 +4,7 @@
 conjugate direction ``t``, the gap ``g`` and the preconditioned gap ``z`` on the
 contact set ``S = {p > 0}`` only, as compressed vectors beside the flat indices of ``S`` in this rank's
 slab (``idx``) and in the padded FFT buffer (``pidx``); the kernels that work on
-them are in ``petgap/_contact_set.pyx``.
+them are in ``petgap/solvers/_contact_set.pyx``.
 
 Why a class around six arrays: memory.  A cold start from a uniform pressure
 puts about 60 % of the points in ``S`` after its first step, and the set then
@@ -17,6 +17,7 @@ of the largest set plus one array in transit.
 """
 import numpy as np
 
+from petgap.parallel.log import SET_UPDATE_EVENT, event
 from petgap.solvers import _contact_set as _cs
 
 #: dtype of the index lists (``index_t`` of the kernels)
@@ -112,17 +113,19 @@ class ContactSet:
         """Drop the points whose pressure fell to zero, let ``added`` in with ``added_p``.
 
         ``added`` are sorted flat indices off ``S``; those with ``added_p <= 0``
-        stay out; the others enter with a zero direction.
+        stay out; the others enter with a zero direction.  Timed in the PETSc
+        log event :data:`petgap.parallel.log.SET_UPDATE_EVENT`.
         """
-        needed = self.size + len(added)
-        if needed > self.capacity:
-            self._resize(max(int(_SPARE * needed), 1024))
-        self.size = _cs.merge(self._idx, self._pidx, self._p, self._t, self.size,
-                              np.ascontiguousarray(added, dtype=INDEX),
-                              np.ascontiguousarray(added_p, dtype=float), self.mask,
-                              self.padded_width)
-        if self.capacity > 4096 and self.size < _SHRINK_BELOW * self.capacity:
-            self._resize(max(int(_SPARE * self.size), 1024))
+        with event(SET_UPDATE_EVENT):
+            needed = self.size + len(added)
+            if needed > self.capacity:
+                self._resize(max(int(_SPARE * needed), 1024))
+            self.size = _cs.merge(self._idx, self._pidx, self._p, self._t, self.size,
+                                  np.ascontiguousarray(added, dtype=INDEX),
+                                  np.ascontiguousarray(added_p, dtype=float), self.mask,
+                                  self.padded_width)
+            if self.capacity > 4096 and self.size < _SHRINK_BELOW * self.capacity:
+                self._resize(max(int(_SPARE * self.size), 1024))
 
     def _resize(self, capacity):
         # One array at a time: the transient is a single array, not a second set.

@@ -57,29 +57,21 @@ it by at least half the last residual (``grad + P0 < -r / 2`` at ``g = 0``,
 ``r`` the last ``max_F |grad + P0|``, ``P0`` estimated over the points off
 the wall): a point that will dominate the new residual.  Weaker releases (the
 edges of rough contacts, a pixel or two per step) are left to the recurrence:
-restarting on every change of ``F`` costs rough surfaces up to
-15 %, and changes, by round-off, the path of a sticky solve on 1 and 2 ranks
+restarting on every change of ``F`` costs rough surfaces iterations, and lets
+round-off decide the path of a sticky solve differently on 1 and 2 ranks
 (``test_two_ranks_equal_one_with_adhesion``).  Counting the strong pulls costs
-one more pass over the slab (up to half a transform pair at 1024^2), made
-only when the recurrence would go on with points at the wall in ``F``: in
-2-7 % of the iterations on rough surfaces, a quarter on Johnson's wave below.
+one more pass over the slab, made only when the recurrence would go on with
+points at the wall in ``F``: a few percent of the iterations on rough
+surfaces, more on Johnson's wave.
 Mean-gap control only: load control, which :func:`petgap.solvers.dispatch.solve` gives
 this solver for the hard wall alone, has no count of the points off the wall
 to compare with, and hard-wall edges have no crack tip to crawl.
 
-Measured on Johnson's wave (``tests/solvers/test_adhesion.py``: 2048 pixels per
-wavelength, ``alpha = 0.3``, ``l_pz = 4 a0``, tolerance 1e-6) in warm-started
-mean-gap steps of 0.05 ``h_a`` between 0.2 and 1.2 ``h_a``, each moving the
-edges by ~20 pixels, with this restart against without it: unloading 1000
-iterations in all (32-125 per step) against 6140 (168-900); loading 554 (3-51)
-against 961 (one step of 452); cold solves 690 against 681.  Unloading past
-pull-off (1.35 to 1.4 ``h_a``) takes 93 iterations, and does not converge in
-5000 without it.
-Mean-gap sweeps on self-affine surfaces at 256^2 and 512^2 (H = 0.8, ``rho``
-from ``a0 / 4`` to ``4 a0``, hard wall too; 11 sweeps of 9 steps) take -8 % to
-+6 % iterations per sweep with it than without (-0.3 % in all) and end in the same states; 60
-sticky solves (``rho = a0 / 4``, 30 surfaces, both controls) take as many
-iterations on 1 rank as on 2, with it and without it.
+This is what lets warm-started mean-gap sweeps of Johnson's wave
+(``tests/solvers/test_adhesion.py``) move their edges by tens of pixels per
+step in tens of iterations, and unload past pull-off at all, while sweeps on
+self-affine surfaces take the iterations and end in the states a restart on
+every change of ``F`` would.
 
 Convergence: the largest ``|grad + P0|`` over ``F`` relative to ``h0' E*``
 (:meth:`petgap.mechanics.problem.ContactProblem.kkt_residuals`), judged on a freshly
@@ -88,9 +80,17 @@ evaluated ``p_el``.
 import numpy as np
 from mpi4py import MPI
 
+from petgap.mechanics.problem import Load, MeanGap
 from petgap.parallel.collective import global_sums
+from petgap.parallel.log import GAP_CG_EVENT, event
 from petgap.solvers import _kernels as _k
-from petgap.mechanics.problem import Load, MeanGap, Timer, judge
+from petgap.solvers.convergence import Timer, judge
+
+
+def _pass(kernel, *args):
+    """``kernel(*args)``, timed in the PETSc log event of the gap solver's passes."""
+    with event(GAP_CG_EVENT):
+        return kernel(*args)
 
 
 def _project_mean(grid, g, target, h, padded, comm):
@@ -112,18 +112,18 @@ def _project_mean(grid, g, target, h, padded, comm):
     n = grid.npoints
     mu = target - grid.mean(g)
     # start to the right of the root: the mean of max(., 0) is at least the mean
-    s, count = global_sums(comm, *_k.shifted_positive_sums(g, mu))
+    s, count = global_sums(comm, *_pass(_k.shifted_positive_sums, g, mu))
     for _ in range(100):
         excess = s / n - target
         if abs(excess) <= 1e-14 * max(abs(target), 1e-300) or count == 0:
             break
         mu -= excess * n / count
-        s_new, count = global_sums(comm, *_k.shifted_positive_sums(g, mu))
+        s_new, count = global_sums(comm, *_pass(_k.shifted_positive_sums, g, mu))
         if s_new / n - target >= excess and excess > 0:  # no progress: converged to round-off
             s = s_new
             break
         s = s_new
-    _k.project_and_load(g, mu, h, padded)
+    _pass(_k.project_and_load, g, mu, h, padded)
 
 
 def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_gap=None,
@@ -196,7 +196,7 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
 
     def fresh_pressure():
         half_space.apply_in_buffer(inverse=False)
-        _k.copy_from(pel, padded)
+        _pass(_k.copy_from, pel, padded)
 
     fresh_pressure()
     fresh, since_fresh = True, 0
@@ -207,18 +207,18 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
     lam_f = lam if load else 0.0
     for it in range(max_iterations + 1):
         if adh:
-            _k.gcg_interaction(g, vp, w, rho)
+            _pass(_k.gcg_interaction, g, vp, w, rho)
         if not load:
-            s_open, n_open = global_sums(comm, *_k.gcg_open_sums(pel, g, vp, adh))
+            s_open, n_open = global_sums(comm, *_pass(_k.gcg_open_sums, pel, g, vp, adh))
             lam_f = -s_open / n_open if n_open > 0 else 0.0
-        s_free, n_free, gmax, gmin = _k.gcg_free_sums(pel, g, vp, adh, lam_f)
+        s_free, n_free, gmax, gmin = _pass(_k.gcg_free_sums, pel, g, vp, adh, lam_f)
         s_free, n_free = global_sums(comm, s_free, n_free)
         if beta_ok and not load and n_free > n_open:
             # points at the wall joined F: restart if one is pulled off it by half the
             # last residual or more (module docstring).  One more pass, in the few
             # iterations that would go on with points at the wall in F.
             pull = 0.5 * history[-1] * problem.pressure_scale
-            strong = _k.gcg_free_sums(pel, g, vp, adh, lam_f + pull)[1]
+            strong = _pass(_k.gcg_free_sums, pel, g, vp, adh, lam_f + pull)[1]
             beta_ok = comm.allreduce(strong, op=MPI.SUM) == n_open
         ext = np.array([gmax, -gmin])
         comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
@@ -239,9 +239,10 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
             break
 
         # preconditioned residual z = P_F K^{-1} P_F r (one pair)
-        _k.gcg_write_residual(pel, g, vp, adh, lam_f, lam, padded)
+        _pass(_k.gcg_write_residual, pel, g, vp, adh, lam_f, lam, padded)
         half_space.apply_in_buffer(inverse=True)
-        sum_z, rz, sum_r = global_sums(comm, *_k.gcg_precond_sums(padded, pel, g, vp, adh, lam_f, lam))
+        sum_z, rz, sum_r = global_sums(
+            comm, *_pass(_k.gcg_precond_sums, padded, pel, g, vp, adh, lam_f, lam))
         if load:
             # mean mode: z += c mean(r) on F, i.e. a shift of -c sum_r / n
             zshift = -mean_mode * sum_r / n
@@ -250,11 +251,11 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
             zshift = sum_z / n_free
         beta = rz / rz_old if beta_ok else 0.0
         rz_old = rz
-        _k.gcg_direction(padded, pel, g, vp, adh, t, lam_f, zshift, beta)
+        _pass(_k.gcg_direction, padded, pel, g, vp, adh, t, lam_f, zshift, beta)
 
         # curvature along t (one pair): K t lands in the buffer
         half_space.apply_in_buffer(inverse=False)
-        curv, slope, tmax, reach = _k.gcg_curvature(padded, t, pel, g, vp, adh,
+        curv, slope, tmax, reach = _pass(_k.gcg_curvature, padded, t, pel, g, vp, adh,
                                                     lam if load else 0.0, rho)
         curv, slope = global_sums(comm, curv, slope)
         tmax = comm.allreduce(tmax, op=MPI.MAX)
@@ -276,7 +277,7 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
         else:
             negative_curvature += 1
             tau = rho / tmax if tmax > 0 else 0.0
-        negative = comm.allreduce(_k.gcg_step(g, t, tau), op=MPI.SUM)
+        negative = comm.allreduce(_pass(_k.gcg_step, g, t, tau), op=MPI.SUM)
         if negative > 0 or curv <= 0 or capped or since_fresh >= refresh_interval:
             # the projection acts: new free set, fresh elastic pressure, restart
             if load:
@@ -288,7 +289,7 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
             fresh, since_fresh = True, 0
             beta_ok = negative == 0 and curv > 0 and not capped
         else:
-            _k.axpy(pel, padded, tau)
+            _pass(_k.axpy, pel, padded, tau)
             fresh = False
             since_fresh += 1
             beta_ok = True

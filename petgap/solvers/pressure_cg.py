@@ -36,7 +36,7 @@ cannot accumulate into the answer.
 
 The contact set is stored as sorted index lists, with the pressure, the
 conjugate direction, the gap and the preconditioned gap kept on it only
-(:mod:`petgap.solvers.contact_set`, kernels in ``petgap/_contact_set.pyx``), and the
+(:mod:`petgap.solvers.contact_set`, kernels in ``petgap/solvers/_contact_set.pyx``), and the
 transforms take their input from those lists and, for ``P_S K P_S g``, give
 their output back on them (:meth:`petgap.mechanics.half_space.ElasticHalfSpace.apply_sparse`):
 at a few percent contact an iteration then streams the slab through memory
@@ -46,16 +46,16 @@ between iterations, in the padded layout the transform writes it in; the gap
 ``g = u - h + d`` is recomputed where it is needed.
 
 Cold start: from the solution on a grid 2 or 4 times coarser where the
-grid's shape allows (:mod:`petgap.solvers.coarse`; about half the time at 512^2 and
-1024^2), otherwise, under load control, from a uniform pressure.  The
+grid's shape allows (:mod:`petgap.solvers.coarse`, driven by
+:func:`coarse_start_pressure`), otherwise, under load control, from a uniform pressure.  The
 uniform start's first iteration has a closed form
 (:func:`_uniform_first_iteration`: one transform instead of three, and no
 set of every point), after which about 60 % of the points are in S on rough
 surfaces; the set shrinks from there by some 20 % per iteration, updated in
 place, so its peak is one copy of that first set (32 bytes per point of it).
 A start nearer the answer built from the geometry alone (the rigid approach
-carrying the load) saved 5-15 % of the iterations but did not converge on
-some surfaces (see the comment in :func:`polonsky_keer`).
+carrying the load) saves a few iterations where it works but does not
+converge on some surfaces (see the comment in :func:`polonsky_keer`).
 
 Convergence is judged at the start of an iteration, on the pair ``(p, g)`` the
 iteration starts from, by the gap residual of
@@ -65,11 +65,13 @@ zero by construction: ``p >= 0`` and ``p = 0`` off ``S``).
 import numpy as np
 from mpi4py import MPI
 
+from petgap.mechanics.problem import Load, MeanGap
 from petgap.parallel.collective import global_sums
+from petgap.parallel.log import GAP_PASS_EVENT, SET_UPDATE_EVENT, event
 from petgap.solvers import _contact_set as _cs
 from petgap.solvers import coarse
-from petgap.mechanics.problem import Load, MeanGap, Timer, judge
 from petgap.solvers.contact_set import INDEX, ContactSet
+from petgap.solvers.convergence import Timer, judge
 
 
 def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
@@ -126,15 +128,14 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
 
     start = "warm" if initial_pressure is not None else ""
     if initial_pressure is None and coarse_start:
-        initial_pressure, start = _coarse_start(problem, control, tolerance,
-                                                      max_iterations)
+        initial_pressure, start = coarse_start_pressure(problem, control, tolerance, max_iterations)
     start_time = timer()
     if initial_pressure is None:
         start = "; ".join(filter(None, [
             start, "uniform pressure" if load else "overlap of the undeformed surfaces"]))
     start_ops = problem.operator_applications
     # The contact set S = {p > 0} as sorted index lists, with p and the
-    # conjugate direction t stored on S only (see petgap/contact_set.py).
+    # conjugate direction t stored on S only (see petgap/solvers/contact_set.py).
     mask = np.zeros(grid.local_shape, dtype=np.uint8)
     padded = grid.padded
     padded_width = padded.shape[1]
@@ -162,8 +163,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         # stiffness overshoots the long wavelengths (the compliance 2 / (E* q)
         # is large there), so the first displacement makes whole valleys
         # penetrate; their entering pressures, rescaled to the load, then crush
-        # the summits, and the set oscillated at 20-60 % of the points without
-        # converging (seen at 1024^2 and 8192^2).
+        # the summits, and the set can oscillate at 20-60 % of the points
+        # without converging.
         contact = None
     overlap = np.empty(max(1024, n // (100 * comm.size)), dtype=INDEX)
     # u = K^{-1} p, kept in the padded layout so that the transform writes it
@@ -201,13 +202,16 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             since_fresh = 0
         else:
             since_fresh += 1
-        n_contact, sum_g = global_sums(comm, len(idx), _cs.gather_gap(u, pidx, h, idx, offset, gS))
+        with event(GAP_PASS_EVENT):
+            sum_g = _cs.gather_gap(u, pidx, h, idx, offset, gS)
+        n_contact, sum_g = global_sums(comm, len(idx), sum_g)
         shift = sum_g / n_contact if (load and n_contact > 0) else 0.0
-        in_max, g_norm = _cs.shift_and_norms(gS, shift)
-        pen_max, n_over = _cs.gap_pass(u, h, mask, offset - shift, overlap)
-        if n_over > len(overlap):
-            overlap = np.empty(2 * n_over, dtype=INDEX)
-            _cs.collect_overlap(u, h, mask, offset - shift, overlap)
+        with event(GAP_PASS_EVENT):
+            in_max, g_norm = _cs.shift_and_norms(gS, shift)
+            pen_max, n_over = _cs.gap_pass(u, h, mask, offset - shift, overlap)
+            if n_over > len(overlap):
+                overlap = np.empty(2 * n_over, dtype=INDEX)
+                _cs.collect_overlap(u, h, mask, offset - shift, overlap)
         norms = np.array([in_max, pen_max])
         comm.Allreduce(MPI.IN_PLACE, norms, op=MPI.MAX)
         residual = float(norms.max()) / problem.gap_scale
@@ -263,10 +267,11 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             reason = "breakdown"
             break
         tau = sum_gt / sum_rt
-        entering, clipped, sum_p = _cs.update(pS, tS, gS, tau, tau * stiffness)
-        added = overlap[:min(n_over, len(overlap))]
-        added_p = np.empty(len(added))
-        sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau * stiffness, added_p)
+        with event(SET_UPDATE_EVENT):
+            entering, clipped, sum_p = _cs.update(pS, tS, gS, tau, tau * stiffness)
+            added = overlap[:min(n_over, len(overlap))]
+            added_p = np.empty(len(added))
+            sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau * stiffness, added_p)
         n_overlap, n_clipped, sum_p = global_sums(comm, entering + len(added), clipped, sum_p)
         delta = 0.0 if n_overlap > 0 else 1.0
         scale = target * n / sum_p if load else 1.0
@@ -300,28 +305,6 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         solver="pcg-pressure", iterations=it, wall_time=timer(), history=history,
         operator_applications=problem.operator_applications - start_ops, residuals=residuals,
         start=start, start_time=start_time)
-
-
-def _coarse_start(problem, control, tolerance, max_iterations):
-    """The fine-grid pressure to start from, and a line saying how it was found.
-
-    Returns ``(None, "")`` when the grid is not coarsened (the caller's own
-    cold start applies) or the coarse solve produced NaN.  Collective.
-    """
-    small = coarse.coarse_problem(problem)
-    if small is None:
-        return None, ""
-    solution = polonsky_keer(small, control, tolerance=max(tolerance, coarse.COARSE_TOLERANCE),
-                             max_iterations=max_iterations)
-    pressure = solution.pressure
-    finite = problem.grid.comm.allreduce(bool(np.isfinite(pressure).all()), op=MPI.LAND)
-    description = (f"coarse {small.grid.nx}x{small.grid.ny}: {solution.iterations} "
-                   f"iterations, {solution.reason}"
-                   + (f"; {solution.start}" if solution.start.startswith("coarse") else ""))
-    if not finite:
-        return None, description + " (NaN: not used)"
-    factor = problem.grid.nx // small.grid.nx
-    return coarse.prolong(small.grid, problem.grid, pressure, factor), description
 
 
 def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, max_iterations,
@@ -367,6 +350,32 @@ def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, 
     _cs.direction_from_buffer(padded, contact.pidx, zshift, 0.0, contact.t)
     delta = 0.0 if n_overlap > 0 else 1.0
     return contact, target * grid.npoints / sum_p, delta, gz, residual
+
+
+def coarse_start_pressure(problem, control, tolerance, max_iterations):
+    """A fine-grid pressure to start from: the solution on a coarser grid, prolonged.
+
+    The coarse problem and the transfers are :mod:`petgap.solvers.coarse`'s;
+    the coarse solve is this module's own.  Returns ``(pressure, a line saying
+    how it was found)``, or ``(None, "")`` when the grid is not coarsened (the caller's own
+    cold start applies) or the coarse solve produced NaN.  Collective.
+    """
+    coarse_problem = coarse.coarse_problem(problem)
+    if coarse_problem is None:
+        return None, ""
+    solution = polonsky_keer(coarse_problem, control,
+                             tolerance=max(tolerance, coarse.COARSE_TOLERANCE),
+                             max_iterations=max_iterations)
+    pressure = solution.pressure
+    finite = problem.grid.comm.allreduce(bool(np.isfinite(pressure).all()), op=MPI.LAND)
+    cgrid = coarse_problem.grid
+    description = (f"coarse {cgrid.nx}x{cgrid.ny}: {solution.iterations} "
+                   f"iterations, {solution.reason}"
+                   + (f"; {solution.start}" if solution.start.startswith("coarse") else ""))
+    if not finite:
+        return None, description + " (NaN: not used)"
+    factor = problem.grid.nx // cgrid.nx
+    return coarse.prolong(cgrid, problem.grid, pressure, factor), description
 
 
 def touching_state(problem, control, timer=None):

@@ -8,20 +8,29 @@ Modules
 -------
 :mod:`.self_affine`
     :func:`~petgap.surfaces.self_affine.self_affine`: periodic Gaussian surfaces
-    with the paper's Eq. 5 spectrum, drawn on each rank's own Fourier rows from
-    counter-based random streams (the same seed gives the same surface on any
-    number of ranks); :func:`statistics` (mean, rms height, slope and
-    curvature, spectrally) and :func:`radial_psd`.
+    with the paper's Eq. 5 spectrum (:func:`psd_shape`), drawn on each rank's own
+    Fourier rows from counter-based random streams (the same seed gives the same
+    surface on any number of ranks).
+:mod:`.statistics`
+    :func:`~petgap.surfaces.statistics.statistics` (mean, rms height, slope and
+    curvature, spectrally; the scales of every unit-free residual) and
+    :func:`radial_psd`.
+:mod:`.resampling`
+    A surface's band-limited spectrum carried to another grid (``petgap study``'s
+    resolution ladder).
 :mod:`.topography`
     :func:`load_topography` reads a global ``.npy`` or HDF5 array straight into
     each rank's slab; :func:`save_topography_npy` writes one.
 
-The generator is imported as ``from petgap.surfaces.self_affine import
-self_affine`` (or ``petgap.self_affine``): this package does not re-export it,
-so that ``petgap.surfaces.self_affine`` stays the module.
+The generator and the statistics are imported from their modules
+(``from petgap.surfaces.self_affine import self_affine``,
+``from petgap.surfaces.statistics import statistics``) or from :mod:`petgap`:
+this package does not re-export them, so that ``petgap.surfaces.self_affine``
+and ``petgap.surfaces.statistics`` stay the modules.
 """
-from petgap.surfaces.self_affine import SurfaceStatistics, psd_shape, radial_psd, statistics
+from petgap.surfaces.self_affine import psd_shape
+from petgap.surfaces.statistics import SurfaceStatistics, radial_psd
 from petgap.surfaces.topography import load_topography, save_topography_npy
 
-__all__ = ["SurfaceStatistics", "psd_shape", "radial_psd", "statistics", "load_topography",
+__all__ = ["SurfaceStatistics", "psd_shape", "radial_psd", "load_topography",
            "save_topography_npy"]

@@ -1,9 +1,9 @@
-"""Self-affine random surfaces, generated and analysed on the distributed Fourier slab.
+"""Self-affine random surfaces, generated on the distributed Fourier slab.
 
 A surface is never assembled on one rank: it is drawn, filtered and rescaled on
 each rank's own rows of the transposed Fourier half plane, and transformed to
 the real-space slab with the :class:`~petgap.parallel.grid.Grid`'s FFTW-MPI plans.  That is
-what lets a 65536^2 surface (the paper's largest) be generated at all; serial
+what lets a 65536^2 surface (paper section 7) be generated at all; serial
 generators run out of memory far below that.
 
 Conventions
@@ -23,12 +23,8 @@ Conventions
   is rescaled to a target rms slope or rms height instead, because that is the
   quantity the contact results are expressed in.
 * The ``q = 0`` coefficient is zero: generated surfaces have mean height zero.
-* Statistics are spectral (docs/conventions.md): ``h0 = rms(h - mean)``,
-  ``h0' = sqrt(<|grad h|^2>) = sqrt(sum_q |q|^2 |h_q|^2) / N``,
-  ``h0'' = rms(laplacian h) / 2 = sqrt(sum_q |q|^4 |h_q|^2) / (2 N)``; sums run over
-  the full plane (half-plane rows weighted by ``grid.hermitian_weight``).  For
-  an even ``nx`` or ``ny`` the Nyquist modes count with ``|q_x| = pi / dx``
-  (``|q_y| = pi / dy``): spectral, not finite-difference, derivatives.
+* The surface is rescaled to a spectral rms slope or height, as
+  :mod:`petgap.surfaces.statistics` measures them.
 * Randomness (as Dedalus' ``fill_random``, but counter-based so nothing global is
   ever drawn): global Fourier row ``n`` (``q_y = 2 pi n / Ly``) takes its ``nx``
   complex amplitudes from ``Philox(key=(seed, n))``.  The surface is therefore a
@@ -40,7 +36,6 @@ Conventions
 """
 import numbers
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 from mpi4py import MPI
@@ -54,28 +49,6 @@ RESOLVED_PIXELS = 4.0
 # lambda_min = L / k the k-th harmonic then belongs to the spectrum whatever the
 # last bit of 2 pi k / L is.  Far below any mode spacing (relative 1 / n).
 _CUTOFF_SLACK = 1e-12
-
-
-@dataclass(frozen=True)
-class SurfaceStatistics:
-    """Spectral statistics of a surface, identical on every rank.
-
-    Attributes
-    ----------
-    mean : float
-        Mean height ``<h>``.
-    rms_height : float
-        ``h0 = sqrt(<(h - <h>)^2>)``.
-    rms_slope : float
-        ``h0' = sqrt(<|grad h|^2>)``.
-    rms_curvature : float
-        ``h0'' = sqrt(<(laplacian h)^2>) / 2``.
-    """
-
-    mean: float
-    rms_height: float
-    rms_slope: float
-    rms_curvature: float
 
 
 # --------------------------------------------------------------------- spectrum
@@ -155,8 +128,8 @@ def self_affine(grid, hurst, lambda_min, lambda_max=None, *, rms_slope=None,
     Notes
     -----
     Memory: nothing beyond the grid's FFT buffers (16 bytes per point) and the
-    returned slab (8 bytes per point); ``benchmarks/surface_memory.py`` measured
-    24.1 bytes per point in all at 4096^2 on 1 and 2 ranks.
+    returned slab (8 bytes per point), 24 bytes per point in all, as
+    ``benchmarks/surface_memory.py`` measures.
     """
     hurst = _check_real("hurst", hurst, lambda v: 0 < v < 1, "0 < hurst < 1")
     lambda_min = _check_positive("lambda_min", lambda_min)
@@ -239,94 +212,6 @@ def _fill_spectrum(grid, hurst, lambda_min, lambda_max, seed):
     return fourier  # q = 0 is zero already: psd_shape(0) = 0
 
 
-# ------------------------------------------------------------------- analysis
-def statistics(grid, h_local):
-    """Mean, rms height, rms slope and rms curvature, computed spectrally.
-
-    Parameters
-    ----------
-    grid : petgap.parallel.grid.Grid
-        Its scratch buffers are overwritten.
-    h_local : ndarray, shape ``grid.local_shape``
-        This rank's heights.
-
-    Returns
-    -------
-    SurfaceStatistics
-        The same on every rank (one allreduce of four numbers).
-    """
-    h_local = _check_local_field(grid, h_local, "h_local")
-    c = grid.forward(h_local)
-    if grid.ky_slice.start == 0:
-        c[0, 0] = 0.0  # the mean, removed exactly instead of by subtraction
-    sums = np.array([np.sum(h_local)] + [weighted_power(c, grid.qx, grid.qy,
-                                                        grid.hermitian_weight, p)
-                                         for p in (0, 2, 4)])
-    grid.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
-    n = grid.npoints
-    return SurfaceStatistics(mean=float(sums[0] / n), rms_height=float(np.sqrt(sums[1]) / n),
-                             rms_slope=float(np.sqrt(sums[2]) / n),
-                             rms_curvature=float(np.sqrt(sums[3]) / (2 * n)))
-
-
-def radial_psd(grid, h_local, nbins=None):
-    """Radially averaged power spectral density, identical on every rank.
-
-    ``C(q) = A |h_q|^2 / N^2`` per mode (so ``mean(h^2) = (1 / A) sum_q C(q)``),
-    averaged over the full-plane modes whose ``|q|`` falls in each of ``nbins``
-    logarithmically spaced bins spanning the smallest non-zero to the largest
-    ``|q|`` of the grid.  The ``q = 0`` mode (the mean) is left out, and bins
-    that hold no mode (common at small ``q``, where modes are sparse) are
-    dropped.
-
-    Parameters
-    ----------
-    grid : petgap.parallel.grid.Grid
-        Its scratch buffers are overwritten.
-    h_local : ndarray, shape ``grid.local_shape``
-    nbins : int, optional
-        Number of bins before empty ones are dropped; default about ten per
-        decade of ``q``.
-
-    Returns
-    -------
-    q : ndarray
-        Mean ``|q|`` of the modes in each non-empty bin, increasing.
-    C : ndarray
-        Mean ``C(q)`` over those modes.
-    """
-    h_local = _check_local_field(grid, h_local, "h_local")
-    qs = [2 * np.pi / length for length, n in ((grid.Lx, grid.nx), (grid.Ly, grid.ny)) if n > 1]
-    if not qs:
-        return np.empty(0), np.empty(0)
-    q_min = min(qs)
-    q_max = np.hypot(2 * np.pi * (grid.nx // 2) / grid.Lx, 2 * np.pi * (grid.ny // 2) / grid.Ly)
-    if nbins is None:
-        nbins = max(1, int(np.ceil(10 * np.log10(q_max / q_min))))
-    elif isinstance(nbins, bool) or not isinstance(nbins, numbers.Integral) or nbins < 1:
-        raise ValueError(f"nbins = {nbins!r} is not allowed: need a positive integer or None")
-    edges = np.geomspace(q_min, q_max, int(nbins) + 1)
-    edges[0], edges[-1] = q_min * (1 - 1e-9), q_max * (1 + 1e-9)
-
-    c = grid.forward(h_local)
-    acc = np.zeros((3, int(nbins)))  # mode count, sum of |q|, sum of |h_q|^2
-    qx2 = grid.qx ** 2
-    for j in range(c.shape[0]):
-        q = np.sqrt(qx2 + grid.qy[j] ** 2)
-        index = np.searchsorted(edges, q, side="right") - 1
-        keep = q > 0
-        index, w = index[keep], grid.hermitian_weight[j]
-        acc[0] += w * np.bincount(index, minlength=nbins)
-        acc[1] += w * np.bincount(index, weights=q[keep], minlength=nbins)
-        acc[2] += w * np.bincount(index, weights=np.abs(c[j, keep]) ** 2, minlength=nbins)
-    total = np.empty_like(acc)
-    grid.comm.Reduce(acc, total, op=MPI.SUM, root=0)  # reduce + bcast: bitwise equal everywhere
-    grid.comm.Bcast(total, root=0)
-    full = total[0] > 0
-    count = total[0, full]
-    return total[1, full] / count, grid.area * total[2, full] / (count * grid.npoints ** 2)
-
-
 # ------------------------------------------------------------------ validation
 def _check_real(name, value, allowed, description):
     """``float(value)`` if it is a real number with ``allowed(value)``, else ValueError."""
@@ -346,15 +231,3 @@ def _check_seed(seed):
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or not 0 <= seed < 2 ** 63:
         raise ValueError(f"seed = {seed!r} is not allowed: need an integer with 0 <= seed < 2**63")
     return int(seed)
-
-
-def _check_local_field(grid, h_local, name):
-    """``h_local`` as a float64 array of this rank's slab shape; ValueError on every rank if not."""
-    h_local = np.asarray(h_local, dtype=np.float64)
-    bad = grid.comm.allgather(None if h_local.shape == grid.local_shape
-                              else (h_local.shape, grid.local_shape))
-    for rank, problem in enumerate(bad):
-        if problem is not None:
-            raise ValueError(f"{name} on rank {rank} has shape {problem[0]}, but that rank's slab "
-                             f"of the {grid.nx} x {grid.ny} grid is {problem[1]}")
-    return h_local

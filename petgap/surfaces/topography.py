@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from petgap.surfaces.self_affine import _check_local_field
+from petgap.surfaces.statistics import check_local_field
 
 #: File name extensions load_topography understands.
 SUFFIXES = (".npy", ".h5", ".hdf5")
@@ -114,7 +114,7 @@ def save_topography_npy(grid, h_local, path):
     path = Path(path)
     if path.suffix != ".npy":
         raise ValueError(f"path {str(path)!r} must end in .npy")
-    h_local = np.ascontiguousarray(_check_local_field(grid, h_local, "h_local"), dtype="<f8")
+    h_local = np.ascontiguousarray(check_local_field(grid, h_local, "h_local"), dtype="<f8")
     header = io.BytesIO()
     np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False,
                                                   "shape": grid.shape})

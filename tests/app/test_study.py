@@ -14,7 +14,8 @@ from petgap.app import study
 from petgap.parallel.grid import Grid
 from petgap.io.scene import Scene
 from petgap.surfaces import resampling
-from petgap.surfaces.self_affine import self_affine, statistics
+from petgap.surfaces.self_affine import self_affine
+from petgap.surfaces.statistics import statistics
 from conftest import write_shared as write
 
 SIZE = (24.0, 30.0)      # non-square pixels on the source grid: dx = 0.5, dy = 0.75

@@ -32,8 +32,9 @@ from petgap.parallel.grid import Grid
 from petgap.solvers import pressure_cg as pk
 from petgap.mechanics.interactions import ExponentialAdhesion, HardWall
 from petgap.solvers.pressure_cg import polonsky_keer
-from petgap.solvers.dispatch import GapHessian, solve
+from petgap.solvers.dispatch import solve
 from petgap.solvers.sweeps import sweep
+from petgap.solvers.tao import DimensionlessGap, GapHessian
 from petgap.surfaces.self_affine import self_affine
 
 E_STAR = 2.5  # not 1: a misplaced E* must show
@@ -360,12 +361,11 @@ def test_dimensionless_gap_derivatives(comm, interaction):
     ``e`` and by ``k h0``), and the elastic Hessian must have a unit diagonal,
     which is what makes TAO's absolute constants unit-free.
     """
-    from petgap.solvers.dispatch import _DimensionlessGap
 
     grid = make_grid((33, 20), comm, size=(1.3, 0.7))
     problem = rough_problem(grid, seed=9, lambda_min_pixels=4, interaction=interaction)
     load = 0.05 * problem.pressure_scale
-    scaled = _DimensionlessGap(problem, load)
+    scaled = DimensionlessGap(problem, load)
     h0, k, shape = problem.gap_scale, problem.half_space.point_stiffness(), grid.local_shape
     gap, a = _random_state(grid, problem, seed=11)
     x, v = gap / h0, a / h0

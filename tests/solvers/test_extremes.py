@@ -20,7 +20,8 @@ from petgap.io.results import read_attrs
 from petgap.mechanics.interactions import ExponentialAdhesion, check_resolution
 from petgap.io.scene import Scene, SceneError
 from petgap.solvers.dispatch import solve
-from petgap.surfaces.self_affine import self_affine, statistics
+from petgap.surfaces.self_affine import self_affine
+from petgap.surfaces.statistics import statistics
 
 import h5py  # after petgap.io.results, which selects the MPI build  # noqa: E402
 from conftest import write_shared as write

@@ -12,8 +12,8 @@ from mpi4py import MPI
 from scipy import stats
 
 from petgap.parallel.grid import Grid
-from petgap.surfaces.self_affine import (SurfaceStatistics, _fill_spectrum, psd_shape, radial_psd,
-                            self_affine, statistics)
+from petgap.surfaces.self_affine import _fill_spectrum, psd_shape, self_affine
+from petgap.surfaces.statistics import SurfaceStatistics, radial_psd, statistics
 
 # Awkward grids: odd and even sizes, non-square, one with few rows per rank.
 SHAPES = [(65, 48), (113, 76), (16, 5), (5, 6)]

@@ -1,0 +1,548 @@
+"""The bridge to PETSc TAO: every solve runs as a TAO solve.
+
+The TAO object is created for every solve with the solution Vec laid out as
+the grid's real-space slab, and ``setFromOptions()`` is called last, so the
+PETSc options database (``-tao_type``, ``-tao_monitor``, ``-tao_max_it``,
+``-tao_view``, ``-log_view``...) has the final word, as every PETSc user expects.
+
+* petgap's own conjugate-gradient solvers run inside a TAO ``python`` type
+  (:class:`_PetgapTao`), so that TAO's monitors and views see them;
+* TAO's built-ins (``bncg``, ``blmvm``, ``bqnls``, ``gpcg``) minimise the
+  load-control energy over the gap in dimensionless variables
+  (:class:`DimensionlessGap`) with a matrix-free Hessian (:class:`GapHessian`);
+* the outer loops that turn one control into another: mean-gap control for the
+  built-ins by a secant on the multiplier
+  (:func:`solve_mean_gap_by_multiplier`), adhesive load control by a secant on
+  the mean gap (:func:`solve_load_by_mean_gap`).
+
+:func:`petgap.solvers.dispatch.solve` chooses among them.
+"""
+import math
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from petgap.mechanics.problem import Load, MeanGap
+from petgap.solvers.convergence import Timer
+from petgap.solvers.gap_cg import gap_cg
+from petgap.solvers.pressure_cg import polonsky_keer
+
+#: The solver types run by petgap's own solvers inside a TAO ``python`` type.
+PETGAP_TYPES = ("pcg", "pcg-pressure", "pcg-gap")
+_REASONS = {v: k for k, v in vars(PETSc.TAO.Reason).items() if not k.startswith("_")}
+
+
+class _PetgapTao:
+    """TAO ``python`` context running one of petgap's own conjugate-gradient solvers."""
+
+    def __init__(self, kind, problem, control, tolerance, initial, monitor):
+        self.kind, self.problem, self.control = kind, problem, control
+        self.tolerance, self.initial, self.monitor = tolerance, initial, monitor
+        self.solution = None
+
+    def solve(self, tao):
+        def report(it, residual):
+            tao.monitor(its=it, f=0.0, res=residual)
+            if self.monitor is not None:
+                self.monitor(it, residual)
+        maxit = tao.getMaximumIterations()
+        if self.kind == "pcg-pressure":
+            self.solution = polonsky_keer(
+                self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
+                initial_pressure=None if self.initial is None else self.initial.pressure,
+                monitor=report,
+                coarse_start=PETSc.Options().getBool("petgap_coarse_start", True))
+        else:
+            self.solution = gap_cg(
+                self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
+                initial_gap=None if self.initial is None else self.initial.gap, monitor=report)
+        x = tao.getSolution()
+        x.getArray()[:] = self.solution.gap.ravel()
+        tao.setIterationNumber(self.solution.iterations)
+        tao.setConvergedReason(PETSc.TAO.Reason.CONVERGED_USER if self.solution.converged
+                               else PETSc.TAO.Reason.DIVERGED_MAXITS)
+
+    def view(self, tao, viewer):
+        viewer.printfASCII(f"petgap preconditioned projected conjugate gradients ({self.kind})\n")
+
+
+def tao_solve(problem, control, tao_type, tolerance, max_iterations, initial, options, monitor):
+    grid = problem.grid
+    comm = grid.comm
+    timer = Timer()
+    nloc = grid.local_shape[0] * grid.local_shape[1]
+    x = PETSc.Vec().createMPI((nloc, grid.npoints), comm=comm)
+    tao = PETSc.TAO().create(comm=comm)
+    try:
+        tao.setSolution(x)
+        tao.setMaximumIterations(max_iterations)
+        if tao_type in PETGAP_TYPES:
+            context = _PetgapTao(tao_type, problem, control, tolerance, initial, monitor)
+            tao.setType(PETSc.TAO.Type.PYTHON)
+            tao.setPythonContext(context)
+            # The options stay in force through the solve: TAO reads some of
+            # them there (-tao_view, -tao_converged_reason), not in setFromOptions.
+            with petsc_options(options):
+                tao.setFromOptions()
+                tao.solve()
+            solution = context.solution
+            solution.wall_time = timer()
+            return solution
+        return _gap_tao(problem, control, tao, x, tao_type, tolerance, initial, options,
+                        monitor, timer)
+    finally:
+        tao.destroy()
+        x.destroy()
+
+
+class DimensionlessGap:
+    """The load-control energy in the variables TAO works on: ``x = g / h0``, ``F = E / e``.
+
+    Why: TAO's built-ins carry absolute constants -- the first trial step of
+    the line search, the active-set estimate of BNCG and BQNLS (``as_tol``,
+    ``as_step``: a trial step along the gradient compared with the distance
+    to the bound), the bounds on BNCG's scaling (``delta_min``,
+    ``delta_max``), the initial scaling of the quasi-Newton Hessians.  Given
+    the gap in metres and the energy in joules these constants mean something
+    different in every unit system and on every grid, and so would the
+    iterations: the same dimensionless problem in two unit systems could
+    converge in one and not in the other.
+
+    Here the variable is the gap in units of the rms height ``h0``
+    (:attr:`~petgap.mechanics.problem.ContactProblem.gap_scale`), and the energy is
+    measured in ``e = k dx dy h0^2``, ``k`` the diagonal of the stiffness
+    operator ``K`` (:meth:`~petgap.mechanics.half_space.ElasticHalfSpace.point_stiffness`,
+    about ``1.2 E* / a0``).  Then the Hessian ``(K + v''(g)) / k`` has a unit
+    diagonal where the interaction's curvature is small: a Jacobi scaling,
+    and since ``K`` is a convolution its diagonal is the same ``k`` at every
+    point, so the scaling is one number and the bound ``x >= 0`` stays a
+    bound.  A unit step along the gradient is then a Newton step for an
+    isolated point, and every constant above means the same thing in every
+    unit system.  The grid enters only through dimensionless ratios (``h0 /
+    a0``, the spectrum of ``K / k``), as it does in the problem itself.
+
+    By the chain rule the gradient is ``dF/dx = (p + v'(g)) / (k h0)``, with
+    ``p + v'(g)`` the gradient of the energy per pixel area, a pressure.  The
+    KKT residual that decides convergence is computed from that pressure and
+    the physical gap, exactly as for the other solvers (unit-free by ``h0' E*``),
+    before the gradient is scaled.
+
+    ``-tao_monitor`` and ``-tao_view`` therefore print ``F`` and ``|dF/dx|``,
+    pure numbers.  Memory: one scratch array of the physical gap ``h0 x`` (the
+    objective and the elastic operator work on lengths); it becomes the
+    solution's gap.
+    """
+
+    def __init__(self, problem, mean_pressure):
+        grid = problem.grid
+        self.problem, self.mean_pressure = problem, mean_pressure
+        self.length = problem.gap_scale
+        self.stiffness = problem.half_space.point_stiffness()  # collective, cached
+        self.energy = self.stiffness * grid.pixel_area * self.length ** 2
+        self.gap = np.empty(grid.local_shape)
+
+    def physical_gap(self, x):
+        """``g = h0 x`` in the scratch array (overwritten by the next evaluation)."""
+        return np.multiply(x, self.length, out=self.gap)
+
+    def set_start(self, x, initial):
+        """Fill ``x`` with the warm start's gap, or a rigid approach to the highest point."""
+        problem = self.problem
+        if initial is not None:
+            np.maximum(initial.gap, 0.0, out=x)
+        else:  # feasible: the highest point touches
+            top = problem.grid.comm.allreduce(float(problem.topography.max()), op=MPI.MAX)
+            np.subtract(top, problem.topography, out=x)
+        x /= self.length
+
+    def evaluate(self, x, grad):
+        """``F(x)``, ``grad`` filled with ``dF/dx``, and the unit-free KKT residual at ``x``."""
+        problem = self.problem
+        g = self.physical_gap(x)
+        f = problem.objective_gradient(g, grad, self.mean_pressure)  # grad = p + v'(g)
+        residual = self._kkt(g, grad)
+        grad *= 1.0 / (self.stiffness * self.length)
+        return f / self.energy, residual
+
+    def _kkt(self, g, stress):
+        """Largest violation of ``p + v' = 0`` off the wall or ``>= 0`` at it, over ``h0' E*``."""
+        local = max(np.max(np.abs(stress[g > 0]), initial=0.0),
+                    np.max(-stress[g <= 0], initial=0.0))
+        problem = self.problem
+        return problem.grid.comm.allreduce(float(local), op=MPI.MAX) / problem.pressure_scale
+
+    def hessian(self, shape):
+        """The matrix-free Hessian in ``x``, ``(K + v''(h0 x)) / k``."""
+        return GapHessian(self.problem, shape, gap_unit=self.length, energy_unit=self.energy)
+
+
+def _gap_tao(problem, control, tao, x, tao_type, tolerance, initial, options, monitor, timer):
+    """Run a TAO built-in on the dimensionless load-control energy (:class:`DimensionlessGap`)."""
+    grid = problem.grid
+    shape = grid.local_shape
+    mean_pressure = float(control.mean_pressure)
+    if mean_pressure < 0 and not problem.interaction.adhesive:
+        raise ValueError(f"mean pressure {mean_pressure} < 0: a non-adhesive interface cannot "
+                         f"carry a tensile load")
+    scaled = DimensionlessGap(problem, mean_pressure)
+    gradient = x.duplicate()
+    lower = x.duplicate()
+    upper = x.duplicate()
+    lower.set(0.0)
+    upper.set(PETSc.INFINITY)
+    start_ops = problem.operator_applications
+    scaled.set_start(x.getArray().reshape(shape), initial)
+    # TAO hands its convergence test a *projected* gradient (zero on active
+    # bounds), which would hide tension at contact points.  The residual is
+    # therefore computed inside the objective callback from the full gradient
+    # and matched to the accepted iterate by a fingerprint of the variables.
+    cache = {}
+
+    def fingerprint(xa):
+        return (float(xa.sum()), float(np.vdot(xa, xa)))
+
+    def objective_gradient(tao, xv, gv):
+        xa = xv.getArray(readonly=True).reshape(shape)
+        f, cache["residual"] = scaled.evaluate(xa, gv.getArray().reshape(shape))
+        cache["key"] = fingerprint(xa)
+        return f
+
+    def convergence_test(tao):
+        xa = x.getArray(readonly=True).reshape(shape)
+        same = grid.comm.allreduce(fingerprint(xa) == cache.get("key"), op=MPI.LAND)
+        if not same:  # the last evaluation was not at the accepted point
+            _, cache["residual"] = scaled.evaluate(xa, gradient.getArray().reshape(shape))
+            cache["key"] = fingerprint(xa)
+        residual = cache["residual"]
+        it = tao.getIterationNumber()
+        if monitor is not None:
+            monitor(it, residual)
+        if not np.isfinite(residual):
+            tao.setConvergedReason(PETSc.TAO.Reason.DIVERGED_NAN)
+        elif residual <= tolerance:
+            tao.setConvergedReason(PETSc.TAO.Reason.CONVERGED_USER)
+        elif it >= tao.getMaximumIterations():
+            tao.setConvergedReason(PETSc.TAO.Reason.DIVERGED_MAXITS)
+        else:
+            tao.setConvergedReason(PETSc.TAO.Reason.CONTINUE_ITERATING)
+
+    hessian = PETSc.Mat().createPython(((x.getLocalSize(), x.getSize()),) * 2,
+                                       scaled.hessian(shape), comm=grid.comm)
+    hessian.setUp()
+
+    def update_hessian(tao, xv, H, P):
+        H.getPythonContext().set_point(xv.getArray(readonly=True).reshape(shape))
+
+    try:
+        tao.setType(tao_type)
+        tao.setObjectiveGradient(objective_gradient, gradient)
+        tao.setHessian(update_hessian, hessian)
+        tao.setVariableBounds((lower, upper))
+        tao.setConvergenceTest(convergence_test)
+        tao.setTolerances(gatol=0.0, grtol=0.0, gttol=0.0)
+        ksp = tao.getKSP()
+        if ksp is not None and ksp.handle:
+            ksp.getPC().setType("none")  # matrix-free Hessian: no entries to factor
+        with petsc_options(options):  # through the solve, as in tao_solve
+            tao.setFromOptions()
+            tao.solve()
+        reason_code = tao.getConvergedReason()
+        reason = _REASONS.get(reason_code, str(reason_code)).lower()
+        converged = reason_code == PETSc.TAO.Reason.CONVERGED_USER
+        g = scaled.physical_gap(x.getArray(readonly=True).reshape(shape))  # the scratch, kept
+        pressure = problem.elastic_pressure(g) + mean_pressure
+        return problem.make_solution(
+            g, pressure, g <= 0, control, converged=converged,
+            reason="converged_kkt" if converged else reason, solver=tao_type,
+            iterations=tao.getIterationNumber(),
+            operator_applications=problem.operator_applications - start_ops,
+            wall_time=timer())
+    finally:
+        for v in (gradient, lower, upper, hessian):
+            v.destroy()
+
+
+def solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance, max_iterations,
+                                  initial, options, monitor, max_outer=60):
+    """Mean-gap control for gap-space TAO types: secant on log(P0) until mean(g) = g_bar.
+
+    Inexact: each inner load-control solve is only as accurate as the step it
+    serves (:func:`_inner_tolerance`).  Why not a fixed inner tolerance well
+    below the outer one: TAO's line searches compare energies, whose round-off
+    hides the decrease of a step once the KKT residual is below about ``1e-9``
+    at 128^2, so a fixed ``tolerance / 100`` is out of reach and would spend
+    the whole iteration budget of a step on its first inner solve, at a guessed
+    ``P0`` that the secant would replace anyway.  Every constant here is in the problem's
+    scales (``h0``, ``h0' E*``), so the iterations are the same in every unit
+    system.
+    """
+    timer = Timer()
+    target = float(control.mean_gap)
+    if not target >= 0:
+        raise ValueError(f"mean gap {target} < 0 is impossible with a hard wall (gap >= 0)")
+    h0, ps = problem.gap_scale, problem.pressure_scale
+    grid = problem.grid
+    top = grid.comm.allreduce(float(problem.topography.max()), op=MPI.MAX)
+    if not problem.interaction.adhesive and target >= top - problem.mean_height:
+        # the rigid surface's highest summit stays clear: no contact, no pressure
+        gap = target + problem.mean_height - problem.topography
+        zero = np.zeros(grid.local_shape)
+        return problem.make_solution(gap, zero, gap <= 0, control, converged=True,
+                                     reason="no_contact", solver=f"{tao_type}+multiplier",
+                                     iterations=0, operator_applications=0, wall_time=timer())
+    start_ops = problem.operator_applications
+    iterations = 0
+    history = []
+    # Starting guess: the previous multiplier, or a typical rough-contact pressure.
+    pressure = initial.mean_pressure if initial is not None and initial.mean_pressure > 0 \
+        else 0.01 * ps
+    # The secant works on log(P0 / (h0' E*)), not log(P0): the same numbers, to the
+    # last bit, in unit systems that differ by powers of two.  Its slope
+    # d g_bar / d log P0 ~ -gamma h0 with gamma ~ 0.5 for rough contact, until measured.
+    slope = -0.5 * h0
+    inner = tolerance  # P0 is a guess: resolving its state any further is wasted
+    points = []
+    solution = initial
+    exhausted = False
+    for outer in range(max_outer):
+        budget = max_iterations - iterations  # the limit is per step, not per inner solve
+        if budget < 1:
+            exhausted = True
+            break
+        solution = tao_solve(problem, Load(pressure), tao_type, inner, budget,
+                              solution, options, monitor)
+        iterations += solution.iterations
+        error = (solution.mean_gap - target) / h0
+        history.append((pressure, solution.mean_gap))
+        # Judged on the state, not on the inner solve's own target: an inner solve
+        # that stopped short of a tighter inner tolerance (a line search lost in the
+        # round-off of the energy) may still leave a state that meets the test, and
+        # its mean gap is still the best the secant can have.
+        usable = _meets_kkt(solution, tolerance)
+        if not usable or abs(error) <= tolerance:
+            break
+        if len(history) >= 3 and history[-1][1] == history[-2][1] == history[-3][1]:
+            break  # the inner solves no longer move the mean gap: reported as not converged
+        points.append((math.log(pressure / ps), solution.mean_gap))
+        if len(points) > 1:
+            (l1, g1), (l2, g2) = points[-2], points[-1]
+            measured = (g2 - g1) / (l2 - l1) if l2 != l1 else slope
+            slope = measured if measured < 0 else -0.5 * h0
+        log_p = points[-1][0] + (target - points[-1][1]) / slope
+        load = math.exp(min(max(log_p, points[-1][0] - 5.0), points[-1][0] + 5.0))
+        pressure = load * ps
+        inner = _inner_tolerance(tolerance, error, load, slope / h0)
+    usable = _meets_kkt(solution, tolerance)
+    converged = not exhausted and usable and abs((solution.mean_gap - target) / h0) <= tolerance
+    reason = "converged_kkt" if converged else "max_iterations" if exhausted else \
+        (solution.reason if not usable else "multiplier_not_converged")
+    result = problem.make_solution(
+        solution.gap, solution.pressure, solution.gap <= 0, control, converged=converged,
+        reason=reason, solver=f"{tao_type}+multiplier", iterations=iterations,
+        operator_applications=problem.operator_applications - start_ops, wall_time=timer(),
+        history=history)
+    return result
+
+
+def _meets_kkt(solution, tolerance):
+    """Whether a state's own unit-free KKT residuals are within ``tolerance``."""
+    return solution.kkt_pressure <= tolerance and solution.kkt_gap <= tolerance
+
+
+def _inner_tolerance(tolerance, error, load, slope, forcing=0.5):
+    """KKT tolerance of the next inner solve of the multiplier loop (unit-free).
+
+    Why: a pressure residual ``r h0' E*`` left by an inner solve acts on the
+    surfaces apart like an error of that size in ``P0``, which moves the mean
+    gap by ``|d g_bar / d log P0| r h0' E* / P0``.  That must stay below a
+    fraction ``forcing`` of the mean-gap error the next step is to remove
+    (an inexact secant, as inexact Newton methods choose their forcing terms),
+    and, near the end, below that fraction of the test ``|g_bar - target| <=
+    tolerance h0``; and never above ``tolerance``, which the returned state must
+    meet.  Compliant (lightly loaded) contact therefore asks for tighter inner
+    solves than stiff contact.  The bound is pessimistic -- a residual bounded
+    in the max norm seldom has that size everywhere at once; measured mean-gap
+    errors were several times smaller -- which leaves margin for the secant.
+
+    Parameters
+    ----------
+    tolerance : float
+        The unit-free tolerance of the whole solve.
+    error : float
+        Mean-gap error of the last inner solve over ``h0``.
+    load : float
+        ``P0 / (h0' E*)`` of the next inner solve.
+    slope : float
+        ``d g_bar / d log P0`` over ``h0`` (negative).
+    """
+    wanted = forcing * max(abs(error), tolerance) * load / abs(slope)
+    return min(tolerance, wanted)
+
+
+def solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial, options,
+                            monitor, max_outer=60):
+    """Adhesive load control: find the mean gap whose multiplier is the load.
+
+    A safeguarded secant (regula falsi once the root is bracketed) on
+    ``P(g_bar) - P0`` with warm-started mean-gap solves.  ``P(g_bar)`` of an
+    adhesive interface need not be monotone; the branch found is the one
+    connected to the starting gap (the previous step of a sweep, else the
+    non-adhesive solution at the same load), and is reported in ``history``.
+    Every trial is warm-started from the last state on that branch; a trial in
+    which every contact has let go of the wall is not followed (adhesion is
+    hysteretic: a separated warm start never finds the contact again) but
+    bisected back towards the branch, down to ``1e-3 h0`` of mean gap: if the
+    branch ends there without carrying the load, that is pull-off, and the
+    separated state is returned with ``converged=False``.  Full contact
+    (``g_bar = 0``) carries every load that leaves no wall reaction tensile.
+    """
+    timer = Timer()
+    target = float(control.mean_pressure)
+    h0 = problem.gap_scale
+    start_ops = problem.operator_applications
+    iterations = 0
+    if initial is not None:
+        gap_guess, state = initial.mean_gap, initial
+    else:
+        # the same surface against a hard wall; its applications count as this
+        # solve's (the half-space is shared)
+        hard = problem.with_interaction(None)
+        seed = polonsky_keer(hard, Load(max(target, 1e-3 * problem.pressure_scale)),
+                             tolerance=max(tolerance, 1e-6), max_iterations=max_iterations)
+        iterations += seed.iterations
+        gap_guess, state = seed.mean_gap, seed
+    points, history = [], []
+    lo = hi = None  # brackets: (gap, P - P0) with opposite signs
+    solution = on_branch = state
+    negative_curvature = 0
+
+    def touching(s):
+        return problem.grid.comm.allreduce(int(np.count_nonzero(s.gap <= 0))) > 0
+    guard = touching(state)
+    release = None  # smallest mean gap tried at which every contact let go
+    exhausted = False
+    for outer in range(max_outer):
+        budget = max_iterations - iterations  # the limit is per step, seed included
+        if budget < 1:
+            exhausted = True  # (the state is then a trial or the hard-wall seed)
+            break
+        solution = tao_solve(problem, MeanGap(max(gap_guess, 0.0)), "pcg-gap", tolerance,
+                              budget, on_branch, options, monitor)
+        iterations += solution.iterations
+        negative_curvature += solution.negative_curvature_steps
+        f = solution.mean_pressure - target
+        history.append((solution.mean_gap, solution.mean_pressure))
+        if not solution.converged or abs(f) <= tolerance * problem.pressure_scale:
+            break
+        if solution.mean_gap == 0.0:
+            # Full contact (every gap at the wall): the mean gap cannot resolve the
+            # load any further, and this state carries every P0 at which no wall
+            # reaction is tensile, p_el + P0 + v'(0) >= 0 (adhesive jump-in).
+            p_el = solution.pressure - solution.mean_pressure
+            least = -problem.grid.comm.allreduce(
+                float(np.min(p_el + problem.interaction.derivative(0.0))), op=MPI.MIN)
+            if target >= least:
+                solution.pressure = p_el + target
+                solution.mean_pressure = problem.grid.mean(solution.pressure)
+                break
+        if guard and not touching(solution):
+            # off the branch (overshoot, or past its end): bisect back towards it
+            release = solution.mean_gap if release is None else min(release, solution.mean_gap)
+            if release - on_branch.mean_gap <= 1e-3 * h0:
+                break  # pull-off: the branch ends without carrying the load
+            gap_guess = 0.5 * (on_branch.mean_gap + release)
+            continue
+        on_branch = solution
+        points.append((solution.mean_gap, f))
+        if f > 0:
+            lo = (solution.mean_gap, f) if lo is None or solution.mean_gap > lo[0] else lo
+        else:
+            hi = (solution.mean_gap, f) if hi is None or solution.mean_gap < hi[0] else hi
+        if len(points) == 1:
+            # stiffness estimate of rough contact: dP/dg ~ -P / (0.5 h0)
+            slope = -max(abs(solution.mean_pressure), 1e-3 * problem.pressure_scale) / (0.5 * h0)
+        else:
+            (g1, f1), (g2, f2) = points[-2], points[-1]
+            slope = (f2 - f1) / (g2 - g1) if g2 != g1 else -problem.pressure_scale / h0
+        step = -f / slope if slope < 0 else (0.5 * h0 if f > 0 else -0.5 * h0)
+        gap_guess = solution.mean_gap + max(min(step, h0), -h0)
+        if lo is not None and hi is not None and not (min(lo[0], hi[0]) < gap_guess < max(lo[0], hi[0])):
+            # regula falsi inside the bracket
+            gap_guess = lo[0] - lo[1] * (hi[0] - lo[0]) / (hi[1] - lo[1])
+        if release is not None:
+            gap_guess = min(gap_guess, 0.5 * (solution.mean_gap + release))
+    converged = not exhausted and solution.converged and \
+        abs(solution.mean_pressure - target) <= tolerance * problem.pressure_scale
+    reason = "converged_kkt" if converged else "max_iterations" if exhausted else \
+        (solution.reason if not solution.converged else "load_not_reached")
+    result = problem.make_solution(
+        solution.gap, solution.pressure, solution.gap <= 0, control, converged=converged,
+        reason=reason, solver="pcg-gap+mean-gap-secant", iterations=iterations,
+        operator_applications=problem.operator_applications - start_ops, wall_time=timer(),
+        history=history)
+    result.negative_curvature_steps = negative_curvature  # of all inner solves
+    return result
+
+
+class GapHessian:
+    """Matrix-free Hessian of the gap energy, a PETSc ``python`` Mat context.
+
+    ``H v = dx dy (K v + v''(g) v)``: the half-space stiffness plus, for an
+    adhesive interaction, its curvature at the current gap (set by TAO through
+    :meth:`set_point`).  Symmetric; positive definite on zero-mean fields for
+    the hard wall.
+
+    With ``gap_unit`` ``l`` and ``energy_unit`` ``e`` it is the Hessian in the
+    variables ``x = g / l`` of the energy ``E / e``: ``(dx dy l^2 / e) (K v +
+    v''(l x) v)``, and :meth:`set_point` takes ``x`` (the scaling of
+    :class:`DimensionlessGap`).  The defaults give the physical Hessian.
+    """
+
+    def __init__(self, problem, shape, gap_unit=1.0, energy_unit=1.0):
+        self.problem, self.shape = problem, shape
+        self.gap_unit = float(gap_unit)
+        self.factor = problem.grid.pixel_area * self.gap_unit ** 2 / energy_unit
+        self.curvature = None
+
+    def set_point(self, x):
+        interaction = self.problem.interaction
+        self.curvature = interaction.curvature(self.gap_unit * x) if interaction.adhesive \
+            else None
+
+    def mult(self, mat, xv, yv):
+        problem = self.problem
+        v = xv.getArray(readonly=True).reshape(self.shape)
+        y = yv.getArray().reshape(self.shape)
+        problem.half_space.pressure(v, out=y)
+        if self.curvature is not None:
+            y += self.curvature * v
+        y *= self.factor
+
+    def multTranspose(self, mat, xv, yv):
+        self.mult(mat, xv, yv)
+
+
+class petsc_options:
+    """Push PETSc options for the duration of a ``with`` block, then restore them."""
+
+    def __init__(self, options):
+        self.options = {str(k).lstrip("-"): ("" if v is None else str(v))
+                        for k, v in (options or {}).items()}
+        self.saved = {}
+
+    def __enter__(self):
+        db = PETSc.Options()
+        for key, value in self.options.items():
+            self.saved[key] = db.getString(key, None) if db.hasName(key) else None
+            db.setValue(key, value)
+        return db
+
+    def __exit__(self, *exc):
+        db = PETSc.Options()
+        for key, old in self.saved.items():
+            if old is None:
+                db.delValue(key)
+            else:
+                db.setValue(key, old)
+        return False

@@ -1,0 +1,143 @@
+"""Spectral statistics of a surface on the distributed Fourier slab.
+
+Statistics are spectral (docs/conventions.md): ``h0 = rms(h - mean)``,
+``h0' = sqrt(<|grad h|^2>) = sqrt(sum_q |q|^2 |h_q|^2) / N``,
+``h0'' = rms(laplacian h) / 2 = sqrt(sum_q |q|^4 |h_q|^2) / (2 N)``; sums run over
+the full plane (half-plane rows weighted by ``grid.hermitian_weight``).  For
+an even ``nx`` or ``ny`` the Nyquist modes count with ``|q_x| = pi / dx``
+(``|q_y| = pi / dy``): spectral, not finite-difference, derivatives.
+
+The mean is removed exactly, by zeroing the ``q = 0`` coefficient, not by
+subtracting its square: a topography far from zero mean (heights read from a
+file) keeps its rms height to round-off.  :class:`petgap.mechanics.problem.ContactProblem`
+takes its residual scales ``h0`` and ``h0'`` from :func:`statistics`, so a
+surface's reported statistics and its problem's scales are the same numbers.
+"""
+import numbers
+from dataclasses import dataclass
+
+import numpy as np
+from mpi4py import MPI
+
+from petgap.parallel._fftw_mpi import weighted_power
+
+
+@dataclass(frozen=True)
+class SurfaceStatistics:
+    """Spectral statistics of a surface, identical on every rank.
+
+    Attributes
+    ----------
+    mean : float
+        Mean height ``<h>``.
+    rms_height : float
+        ``h0 = sqrt(<(h - <h>)^2>)``.
+    rms_slope : float
+        ``h0' = sqrt(<|grad h|^2>)``.
+    rms_curvature : float
+        ``h0'' = sqrt(<(laplacian h)^2>) / 2``.
+    """
+
+    mean: float
+    rms_height: float
+    rms_slope: float
+    rms_curvature: float
+
+
+def statistics(grid, h_local):
+    """Mean, rms height, rms slope and rms curvature, computed spectrally.
+
+    Parameters
+    ----------
+    grid : petgap.parallel.grid.Grid
+        Its scratch buffers are overwritten.
+    h_local : ndarray, shape ``grid.local_shape``
+        This rank's heights.
+
+    Returns
+    -------
+    SurfaceStatistics
+        The same on every rank (one allreduce of four numbers).
+    """
+    h_local = check_local_field(grid, h_local, "h_local")
+    c = grid.forward(h_local)
+    if grid.ky_slice.start == 0:
+        c[0, 0] = 0.0  # the mean, removed exactly instead of by subtraction
+    sums = np.array([np.sum(h_local)] + [weighted_power(c, grid.qx, grid.qy,
+                                                        grid.hermitian_weight, p)
+                                         for p in (0, 2, 4)])
+    grid.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+    n = grid.npoints
+    return SurfaceStatistics(mean=float(sums[0] / n), rms_height=float(np.sqrt(sums[1]) / n),
+                             rms_slope=float(np.sqrt(sums[2]) / n),
+                             rms_curvature=float(np.sqrt(sums[3]) / (2 * n)))
+
+
+def radial_psd(grid, h_local, nbins=None):
+    """Radially averaged power spectral density, identical on every rank.
+
+    ``C(q) = A |h_q|^2 / N^2`` per mode (so ``mean(h^2) = (1 / A) sum_q C(q)``),
+    averaged over the full-plane modes whose ``|q|`` falls in each of ``nbins``
+    logarithmically spaced bins spanning the smallest non-zero to the largest
+    ``|q|`` of the grid.  The ``q = 0`` mode (the mean) is left out, and bins
+    that hold no mode (common at small ``q``, where modes are sparse) are
+    dropped.
+
+    Parameters
+    ----------
+    grid : petgap.parallel.grid.Grid
+        Its scratch buffers are overwritten.
+    h_local : ndarray, shape ``grid.local_shape``
+    nbins : int, optional
+        Number of bins before empty ones are dropped; default about ten per
+        decade of ``q``.
+
+    Returns
+    -------
+    q : ndarray
+        Mean ``|q|`` of the modes in each non-empty bin, increasing.
+    C : ndarray
+        Mean ``C(q)`` over those modes.
+    """
+    h_local = check_local_field(grid, h_local, "h_local")
+    qs = [2 * np.pi / length for length, n in ((grid.Lx, grid.nx), (grid.Ly, grid.ny)) if n > 1]
+    if not qs:
+        return np.empty(0), np.empty(0)
+    q_min = min(qs)
+    q_max = np.hypot(2 * np.pi * (grid.nx // 2) / grid.Lx, 2 * np.pi * (grid.ny // 2) / grid.Ly)
+    if nbins is None:
+        nbins = max(1, int(np.ceil(10 * np.log10(q_max / q_min))))
+    elif isinstance(nbins, bool) or not isinstance(nbins, numbers.Integral) or nbins < 1:
+        raise ValueError(f"nbins = {nbins!r} is not allowed: need a positive integer or None")
+    edges = np.geomspace(q_min, q_max, int(nbins) + 1)
+    edges[0], edges[-1] = q_min * (1 - 1e-9), q_max * (1 + 1e-9)
+
+    c = grid.forward(h_local)
+    acc = np.zeros((3, int(nbins)))  # mode count, sum of |q|, sum of |h_q|^2
+    qx2 = grid.qx ** 2
+    for j in range(c.shape[0]):
+        q = np.sqrt(qx2 + grid.qy[j] ** 2)
+        index = np.searchsorted(edges, q, side="right") - 1
+        keep = q > 0
+        index, w = index[keep], grid.hermitian_weight[j]
+        acc[0] += w * np.bincount(index, minlength=nbins)
+        acc[1] += w * np.bincount(index, weights=q[keep], minlength=nbins)
+        acc[2] += w * np.bincount(index, weights=np.abs(c[j, keep]) ** 2, minlength=nbins)
+    total = np.empty_like(acc)
+    grid.comm.Reduce(acc, total, op=MPI.SUM, root=0)  # reduce + bcast: bitwise equal everywhere
+    grid.comm.Bcast(total, root=0)
+    full = total[0] > 0
+    count = total[0, full]
+    return total[1, full] / count, grid.area * total[2, full] / (count * grid.npoints ** 2)
+
+
+def check_local_field(grid, h_local, name):
+    """``h_local`` as a float64 array of this rank's slab shape; ValueError on every rank if not."""
+    h_local = np.asarray(h_local, dtype=np.float64)
+    bad = grid.comm.allgather(None if h_local.shape == grid.local_shape
+                              else (h_local.shape, grid.local_shape))
+    for rank, problem in enumerate(bad):
+        if problem is not None:
+            raise ValueError(f"{name} on rank {rank} has shape {problem[0]}, but that rank's slab "
+                             f"of the {grid.nx} x {grid.ny} grid is {problem[1]}")
+    return h_local
