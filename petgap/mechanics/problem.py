@@ -69,7 +69,7 @@ class ContactSolution:
     two differ only by points that touch without load, but a JKR-like contact
     has tensile edges, and near pull-off under mean-gap control it may be all
     tension (``contact_fraction = 0``) while still stuck; it is this area that
-    vanishes at pull-off, and that :func:`petgap.solvers.dispatch.annotate_step` watches
+    vanishes at pull-off, and that :func:`petgap.solvers.sweeps.annotate_step` watches
     for jumps.  Forces are per cell:
     ``repulsive_force`` is the hard-wall reaction ``sum dx dy (p + v'(0))`` over
     the points at the wall, ``attractive_force = -sum dx dy v'(g)`` over all
