@@ -51,33 +51,41 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def worker(args):
     """Runs under mpirun: generate (or load) the surface, solve, print one JSON line."""
+    # deferred: only the workers under mpirun load MPI, PETSc and petgap, not the driver
     import resource
     import time
 
-    import numpy as np
     from mpi4py import MPI
-
-    from petgap.mechanics.problem import ContactProblem, Load, MeanGap
     from petsc4py import PETSc
 
+    from petgap.app.build import build
+    from petgap.io.scene import Scene
     from petgap.parallel.log import OPERATOR_EVENT, event
-    from petgap.parallel.grid import Grid
-    from petgap.mechanics.interactions import ExponentialAdhesion
-    from petgap.solvers.dispatch import solve
-    from petgap.surfaces.self_affine import self_affine
     from petgap.surfaces.topography import save_topography_npy
 
     comm = MPI.COMM_WORLD
     n = args.n
     base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    grid = Grid((n, n), comm=comm, planner="measure")
-    h = self_affine(grid, 0.8, 32.0, n / 2, rms_slope=0.1, seed=1)
+    # The benchmark surface as a scene, built as `petgap run` builds it.
+    control = ({"kind": "mean-gap", "values": [args.mean_gap]} if args.mean_gap is not None
+               else {"kind": "load", "values": [args.load]})
+    interaction = ({"kind": "exponential", "work_of_adhesion": args.work, "range": args.range,
+                    "resolution_check": "off"} if args.work > 0 else {"kind": "hard-wall"})
+    solver = {"tao_type": args.solver, "tolerance": args.tolerance,
+              "max_iterations": args.max_iterations, "planner": "measure"}
+    if args.no_coarse:
+        solver["petsc_options"] = {"petgap_coarse_start": 0}
+    scene = Scene.from_dict({
+        "grid": {"nx": n},
+        "surface": {"hurst": 0.8, "lambda_min": 32.0, "lambda_max": n / 2, "rms_slope": 0.1,
+                    "seed": 1},
+        "material": {"contact_modulus": 1.0}, "interaction": interaction, "control": control,
+        "solver": solver}, comm)
+    model = build(scene, comm)
+    grid = model.grid
     if args.save:
-        save_topography_npy(grid, h, args.save)
-    interaction = ExponentialAdhesion(args.work, args.range) if args.work > 0 else None
-    problem = ContactProblem(grid, h, interaction=interaction, contact_modulus=1.0)
-    half_space = problem.half_space
-    control = MeanGap(args.mean_gap) if args.mean_gap is not None else Load(args.load)
+        save_topography_npy(grid, model.topography, args.save)
+    half_space = model.half_space
     # Time spent in the elastic operator itself, from its PETSc log events, to
     # split an evaluation's cost into the transform pair and the rest.
     PETSc.Log.begin()
@@ -85,15 +93,13 @@ def worker(args):
 
     def operator_seconds():
         return operator.getPerfInfo()["time"]
-    options = {"petgap_coarse_start": "0"} if args.no_coarse else None
     marks = []  # (time, operator seconds, applications) at each iteration's verdict
     start_seconds = operator_seconds()
 
     def monitor(iteration, residual):
         marks.append((time.perf_counter(), operator_seconds() - start_seconds,
                       half_space.applications))
-    solution = solve(problem, control, solver=args.solver, tolerance=args.tolerance,
-                     max_iterations=args.max_iterations, options=options, monitor=monitor)
+    (solution,) = model.sweep(monitor=monitor)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     peak_total = comm.allreduce((peak - base) * 1024.0)
     if comm.rank == 0:

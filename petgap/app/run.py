@@ -11,12 +11,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import h5py
 import numpy as np
 from mpi4py import MPI
 
 from petgap.app.build import build
-from petgap.io.results import ResultFile, check_free_space, check_output_path
+from petgap.io.results import ResultFile, check_free_space, check_output_path, root_attributes
 from petgap.io.scene import Scene
 from petgap.mechanics.problem import Load, MeanGap
 from petgap.parallel.collective import root_decides
@@ -118,11 +117,11 @@ def _resume_decision(scene, output, comm, overwrite):
         if overwrite or not Path(output).exists():
             return False
         try:
-            with h5py.File(output, "r") as f:  # rank 0 alone, serial: a look at the root
-                same = f.attrs.get("scene") == scene.text
-                return bool(same and not bool(f.attrs.get("complete", False)))
+            attrs = root_attributes(output)  # rank 0 alone, serial: a look at the root
         except OSError:
             return False
+        same = attrs.get("scene") == scene.text
+        return bool(same and not bool(attrs.get("complete", False)))
     decision = root_decides(comm, decide)
     if decision:
         with ResultFile.open_for_resume(output, comm) as result:

@@ -534,6 +534,16 @@ class ResultFile:
 _ABANDONED = []
 
 
+def root_attributes(path):
+    """The root attributes of the HDF5 file ``path``, read serially by the calling rank alone.
+
+    For a quick look before any collective open (is it this scene's unfinished
+    run?); raises OSError when the file cannot be read as HDF5.
+    """
+    with h5py.File(path, "r") as f:
+        return dict(f.attrs)
+
+
 def _check_is_result(path):
     if not path.is_file():
         raise FileNotFoundError(f"result file {path} not found")
