@@ -14,11 +14,16 @@ Modules
     The compiled binding to FFTW-MPI: plans, the fused convolution with
     ``|q|^(+-1)`` and spectral sums.
 :mod:`.collective`
-    :func:`root_decides`: rank 0 decides, every rank returns or raises alike.
+    :func:`root_decides`: rank 0 decides, every rank returns or raises alike;
+    :func:`global_sums`: any number of sums in one reduction.
+:mod:`.dottest`
+    :func:`dottest`: ``<A x, y> = <x, A^T y>`` for a distributed operator.
 :mod:`.log`
-    Rank-aware progress messages and the handling of failures on some ranks.
+    Rank-aware progress messages, the handling of failures on some ranks, and
+    the PETSc log events of petgap's operator and kernels.
 """
-from petgap.parallel.collective import root_decides
+from petgap.parallel.collective import global_sums, root_decides
+from petgap.parallel.dottest import dottest
 from petgap.parallel.grid import DecompositionError, Grid
 
-__all__ = ["Grid", "DecompositionError", "root_decides"]
+__all__ = ["Grid", "DecompositionError", "root_decides", "global_sums", "dottest"]

@@ -4,6 +4,7 @@ import pytest
 from mpi4py import MPI
 
 from petgap.mechanics.half_space import ElasticHalfSpace
+from petgap.parallel.dottest import dottest
 from petgap.parallel.grid import Grid
 
 AWKWARD = [(65, 48), (113, 76), (9, 7)]
@@ -36,14 +37,27 @@ def test_symmetric_positive_dot_test(comm):
     """<K a, b> = <a, K b>, <a, K a> > 0 and K^{-1} K = identity on zero-mean fields."""
     grid = Grid((33, 20), comm=comm, planner="estimate")
     half_space = ElasticHalfSpace(grid)
+    dottest(grid, half_space.pressure, seed=11, rtol=1e-12)
+    dottest(grid, half_space.displacement, seed=12, rtol=1e-12)
     rng = np.random.default_rng(11 + comm.rank)
-    a, b = rng.standard_normal((2,) + grid.local_shape)
-    ka, kb = half_space.pressure(a), half_space.pressure(b)
-    lhs, rhs = grid.sum(ka * b), grid.sum(a * kb)
-    assert abs(lhs - rhs) <= 1e-12 * np.sqrt(grid.sum(ka * ka) * grid.sum(b * b))
+    a = rng.standard_normal(grid.local_shape)
+    ka = half_space.pressure(a)
     assert grid.sum(a * ka) > 0
     back = half_space.displacement(ka)
     np.testing.assert_allclose(back, a - grid.mean(a), atol=1e-12)
+
+
+def test_dottest_catches_a_wrong_adjoint(comm):
+    """The utility fails, on every rank alike, for an operator that is not its own transpose."""
+    grid = Grid((24, 18), comm=comm, planner="estimate")
+    half_space = ElasticHalfSpace(grid)
+    shift = grid.local_positions()[0] / grid.Lx      # a diagonal that differs from point to point
+
+    def skewed(x):
+        return half_space.pressure(x * (1.0 + shift))
+    with pytest.raises(AssertionError, match="dot test failed"):
+        dottest(grid, skewed)
+    dottest(grid, skewed, lambda y: (1.0 + shift) * half_space.pressure(y))
 
 
 @pytest.mark.parametrize("shape", AWKWARD)
