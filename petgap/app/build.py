@@ -22,12 +22,15 @@ from dataclasses import dataclass, field
 from mpi4py import MPI
 
 from petgap.app import protocol
+from petgap.io.scene import SceneError
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.interactions import ExponentialAdhesion, check_resolution
 from petgap.mechanics.problem import ContactProblem
 from petgap.parallel.grid import Grid
-from petgap.parallel.log import timed
+from petgap.parallel.log import get_logger, timed
+from petgap.solvers.dispatch import SOLVER_TYPES
 from petgap.solvers.sweeps import SweepStep, sweep
+from petgap.solvers.tao import check_petsc_options
 from petgap.surfaces.self_affine import self_affine
 from petgap.surfaces.statistics import statistics as surface_statistics
 from petgap.surfaces.topography import load_topography
@@ -64,6 +67,42 @@ def petsc_options_dict(args):
             options[name] = ""
             i += 1
     return options
+
+
+def check_options(scene, petsc_args=(), strict=False, log=None):
+    """Check the scene's ``solver.petsc_options`` and the command line's PETSc options.
+
+    A malformed value of an option petgap reads (``-tao_max_it notanumber``)
+    or an unsupported ``-tao_type`` is a :class:`~petgap.io.scene.SceneError`
+    naming the option, its value, where it was given and what is allowed.  An
+    option petgap does not read (a misspelling: ``-tao_monitr``) is a warning
+    naming it, or with ``strict`` an error.  Pure and the same on every rank.
+    """
+    sources = (("solver.petsc_options", dict(scene.solver.petsc_options)),
+               ("the command line after --", petsc_options_dict(petsc_args)))
+    errors, unknown = [], []
+    for where, options in sources:
+        bad, strange = check_petsc_options(options)
+        errors += [f"PETSc option -{name} {value!r} ({where}): {problem}; allowed: {allowed}"
+                   for name, value, problem, allowed in bad]
+        tao_type = options.get("tao_type")
+        if tao_type is not None and tao_type not in SOLVER_TYPES + ("python",):
+            errors.append(f"PETSc option -tao_type {tao_type!r} ({where}): is not a solver "
+                          f"petgap runs; allowed: {', '.join(SOLVER_TYPES)}")
+        unknown += [(f"-{name} ({where})", f" (did you mean -{close}?)" if close else "")
+                    for name, close in strange]
+    if unknown and strict:
+        errors += [f"PETSc option {u}: petgap does not read it{hint}; allowed with --strict: "
+                   f"the options petgap reads (petgap.solvers.tao.KNOWN_OPTIONS)"
+                   for u, hint in unknown]
+    if errors:
+        raise SceneError(errors[0] if len(errors) == 1 else
+                         f"{len(errors)} errors:\n" + "\n".join(f"  - {e}" for e in errors),
+                         errors)
+    for u, hint in unknown:
+        (log or get_logger("build")).warning(
+            "PETSc option %s is not read by petgap and is ignored%s; petgap run --strict "
+            "makes this an error", u, hint)
 
 
 def _is_number(text):
@@ -151,7 +190,8 @@ class Model:
         return sweep(None, self.sweep_steps(states), **{**self.solve_options, **solve_options})
 
 
-def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=None, log=None):
+def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=None, log=None,
+          strict=False):
     """Build a scene's grid, surface, problems and steps on ``comm`` (collective).
 
     Parameters
@@ -170,12 +210,15 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
         interaction (default: the scene's ``interaction.resolution_check``).
     log : logging.Logger, optional
         Where the FFT planning and surface making are timed (default: not logged).
+    strict : bool
+        An unknown PETSc option is an error, not a warning (:func:`check_options`).
 
     Returns
     -------
     Model
     """
     comm = MPI.COMM_WORLD if comm is None else comm
+    check_options(scene, petsc_args, strict=strict, log=log)
     with _timed(log, f"planning FFTs ({scene.solver.planner})"):
         grid = make_grid(scene, comm)
     with _timed(log, "making the surface"):

@@ -5,6 +5,7 @@ the topography, then one group per step, each written as soon as it is solved,
 so that an interrupted run keeps every finished step and the same command
 continues it (:func:`run_scene`).  The command line is in :mod:`petgap.app.main`.
 """
+import json
 import shlex
 import signal
 import time
@@ -15,7 +16,8 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.app.build import build
-from petgap.io.results import ResultFile, check_free_space, check_output_path, root_attributes
+from petgap.io.results import (ResultExistsError, ResultFile, check_free_space,
+                                existing_result, output_path_error)
 from petgap.io.scene import Scene
 from petgap.mechanics.problem import Load, MeanGap
 from petgap.parallel.collective import root_decides
@@ -31,6 +33,8 @@ class RunResult:
     statistics: object
     steps: list
     model: object = None
+    #: True if the output was this scene's complete result already, left as it was.
+    complete_already: bool = False
 
 
 def describe_surface(scene):
@@ -47,12 +51,15 @@ def describe_surface(scene):
             f"({s.lambda_max / g.a0:g} a0), {target}, seed {s.seed}, {size}")
 
 
-def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), logger=None):
+def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), logger=None,
+              strict=False):
     """Run a scene on ``comm`` (default COMM_WORLD) and write its result file.
 
-    Collective.  Refuses an existing ``output`` early (unless ``overwrite``,
-    or unless it is this scene's own interrupted run, which is continued),
-    builds the scene (:func:`petgap.app.build.build`), creates the result file
+    Collective.  Refuses an existing ``output`` early, saying why (unless
+    ``overwrite``, or unless it is this scene's own interrupted run, which is
+    continued, or its complete result, which is left as it is and returned
+    with ``complete_already``), and refuses, ``overwrite`` or not, an output
+    that is a directory, a device or a file the run reads; builds the scene (:func:`petgap.app.build.build`), creates the result file
     with the provenance and the topography, and solves the planned steps,
     writing each as soon as it is done.
 
@@ -64,6 +71,8 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
     petsc_args : sequence of str
         Extra PETSc options (command-line style), applied after
         ``scene.solver.petsc_options``.
+    strict : bool
+        A PETSc option petgap does not read is an error (a warning otherwise).
 
     Returns
     -------
@@ -72,15 +81,19 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
     comm = MPI.COMM_WORLD if comm is None else comm
     log = logger or get_logger("run")
     if output is None:
-        output = Path(f"{Path(scene.path).stem if scene.path else 'scene'}.h5")
-    output = Path(output)
+        output = f"{Path(scene.path).stem if scene.path else 'scene'}.h5"
+    raw_output, output = output, Path(output)
 
-    resume = _resume_decision(scene, output, comm, overwrite)
-    if not resume:
-        check_output_path(output, comm, overwrite)  # before any expensive work
+    state = _output_state(scene, raw_output, comm, overwrite)  # before any expensive work
+    if state == "complete":
+        log.info("%s is complete, made from this scene; nothing to do (pass --overwrite to "
+                 "compute it again)", output)
+        return RunResult(output=output, grid=None, topography=None, statistics=None, steps=[],
+                         complete_already=True)
+    resume = state == "resume"
     log.info("%d rank%s; result file %s%s", comm.size, "" if comm.size == 1 else "s", output,
              " (continuing an interrupted run)" if resume else "")
-    model = build(scene, comm, petsc_args=petsc_args, log=log)
+    model = build(scene, comm, petsc_args=petsc_args, log=log, strict=strict)
     grid, topography = model.grid, model.topography
     log.info(describe_surface(scene))
     stats = model.statistics
@@ -89,7 +102,10 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
     provenance = {"scene": scene.text, "scene_path": str(Path(scene.path).resolve())
                   if scene.path else "", "scene_resolved": scene.to_json(),
                   "petsc_options": shlex.join(model.petsc_args)}
-    if not resume:
+    if resume:  # every check passed (in build too): now the file is touched
+        with ResultFile.open_for_resume(output, comm) as result:
+            result.close(complete=False)
+    else:
         check_free_space(output, 8 * grid.npoints * ("topography" in scene.output.fields), comm)
         with ResultFile.create(output, comm, overwrite=overwrite, provenance=provenance) as result:
             attrs = {"statistics": stats} if scene.output.statistics else None
@@ -107,26 +123,63 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
                      steps=steps or [], model=model)
 
 
-def _resume_decision(scene, output, comm, overwrite):
-    """True if ``output`` is this scene's own interrupted run, to be continued.
+def _inputs(scene):
+    """The files a run of ``scene`` reads, which its output must never replace."""
+    inputs = {"scene file": scene.path}
+    if scene.surface.kind == "file":
+        inputs["topography file (surface.path)"] = scene.surface.path
+    return inputs
 
-    Decided on rank 0.  A complete file, or one made from another scene, is
-    left alone (the usual refusal follows unless ``--overwrite``).
+
+def _output_state(scene, output, comm, overwrite):
+    """What to do with ``output``: ``"new"`` (create it), ``"resume"`` or ``"complete"``.
+
+    Decided on rank 0, raised on every rank.  A path that can never be a result
+    (a directory, a device, an input of the run) is refused, ``overwrite`` or
+    not.  An existing file is, without ``overwrite``: this scene's unfinished
+    run (continued), this scene's complete result (nothing to do), or refused
+    with the reason -- not a readable result, or the result of another scene,
+    named by its first differing key.
     """
     def decide():
-        if overwrite or not Path(output).exists():
-            return False
-        try:
-            attrs = root_attributes(output)  # rank 0 alone, serial: a look at the root
-        except OSError:
-            return False
-        same = attrs.get("scene") == scene.text
-        return bool(same and not bool(attrs.get("complete", False)))
-    decision = root_decides(comm, decide)
-    if decision:
-        with ResultFile.open_for_resume(output, comm) as result:
-            result.close(complete=False)
-    return decision
+        exists = Path(output).exists()
+        output_path_error(output, overwrite=overwrite or exists, inputs=_inputs(scene))
+        if overwrite or not exists:
+            return "new"
+        attrs = existing_result(output)
+        difference = scene_difference(attrs, scene)
+        if difference:
+            raise ResultExistsError(
+                f"refusing to overwrite {output}: it holds the result of a different scene "
+                f"({difference}); pass --overwrite to replace it, or choose another --output")
+        return "complete" if bool(attrs.get("complete", False)) else "resume"
+    return root_decides(comm, decide)
+
+
+def scene_difference(attrs, scene):
+    """How the scene stored in a result file's root ``attrs`` differs from ``scene``, or "".
+
+    Compared on the resolved values (comments and layout of the TOML text do
+    not count); the first differing key is named with both values.  A file
+    without resolved values is compared on the text.
+    """
+    where = scene.path or "the scene given"
+    stored = attrs.get("scene_resolved")
+    if stored is None:
+        return "" if attrs.get("scene") == scene.text else \
+            f"the scene text in the file is not that of {where}"
+    try:
+        old = json.loads(stored)
+    except ValueError:
+        return f"the file's scene_resolved attribute is not JSON, so not that of {where}"
+    new = json.loads(scene.to_json())
+    for section in list(new) + [s for s in old if s not in new]:
+        a, b = old.get(section, {}), new.get(section, {})
+        for key in list(b) + [k for k in a if k not in b]:
+            if a.get(key) != b.get(key):
+                return (f"{section}.{key} = {json.dumps(a.get(key))} in the file, "
+                        f"{json.dumps(b.get(key))} in {where}")
+    return ""
 
 
 def _run_steps(model, output, log, resume):
@@ -304,12 +357,14 @@ def add_parser(subparsers):
                                 description="Run a scene. Options after `--` go to PETSc "
                                             "(e.g. -- -tao_monitor -log_view).")
     run.add_argument("scene", metavar="SCENE.toml", help="scene file")
-    run.add_argument("-o", "--output", type=Path, metavar="PATH",
+    run.add_argument("-o", "--output", metavar="PATH",  # a str: a trailing slash is kept
                      help="result file (default: ./<scene stem>.h5)")
     run.add_argument("--overwrite", action="store_true",
                      help="replace an existing result file")
     run.add_argument("-q", "--quiet", action="store_true",
                      help="print only warnings and errors")
+    run.add_argument("--strict", action="store_true",
+                     help="a PETSc option petgap does not read is an error, not a warning")
     run.set_defaults(func=command)
     return run
 
@@ -317,6 +372,7 @@ def add_parser(subparsers):
 def command(args, comm, petsc_args):
     """``petgap run``: run the scene file and write its result (collective); exit status."""
     scene = Scene.from_file(args.scene, comm)
-    output = args.output if args.output is not None else Path(f"{Path(args.scene).stem}.h5")
-    run_scene(scene, comm, output, overwrite=args.overwrite, petsc_args=petsc_args)
+    output = args.output if args.output is not None else f"{Path(args.scene).stem}.h5"
+    run_scene(scene, comm, output, overwrite=args.overwrite, petsc_args=petsc_args,
+              strict=args.strict)
     return 0

@@ -60,6 +60,10 @@ class ResultExistsError(FileExistsError):
     """The result file exists and overwriting was not asked for."""
 
 
+class OutputPathError(OSError):
+    """The output path can never be a result file (a device, an input of the run)."""
+
+
 class ResultWriteError(OSError):
     """A write into a result file failed inside HDF5 (see :meth:`ResultFile.__exit__`).
 
@@ -89,32 +93,81 @@ def _default_comm(comm):
     return MPI.COMM_WORLD if comm is None else comm
 
 
-def check_output_path(path, comm=None, overwrite=False):
+def check_output_path(path, comm=None, overwrite=False, inputs=()):
     """Raise the same error on every rank if ``path`` cannot be created as a result file.
 
-    :class:`ResultExistsError` if it exists and ``overwrite`` is false,
-    FileNotFoundError if its directory does not exist, PermissionError if the
-    directory is not writable (read-only file system, permissions).  Cheap;
+    See :func:`output_path_error` (rank 0 looks, every rank raises).  Cheap;
     callers use it to fail before spending time on a run.
     """
-    comm = _default_comm(comm)
-    path = Path(path)
+    root_decides(_default_comm(comm), lambda: output_path_error(path, overwrite, inputs))
 
-    def check():
-        if path.is_dir():  # before the existence test, whose message would call it a file
-            raise IsADirectoryError(f"output path {path} is a directory; give a file name")
-        if path.exists() and not overwrite:
-            raise ResultExistsError(
-                f"refusing to overwrite the existing result file {path}; "
-                f"pass --overwrite to replace it, or choose another --output")
-        parent = path.parent if str(path.parent) else Path(".")
-        if not parent.is_dir():
-            raise FileNotFoundError(f"cannot create result file {path}: "
-                                    f"directory {parent} does not exist")
-        if not os.access(parent, os.W_OK | os.X_OK):  # EROFS counts, even for root
-            raise PermissionError(f"cannot create result file {path}: directory {parent} "
-                                  f"is not writable (read-only file system or permissions)")
-    root_decides(comm, check)
+
+def output_path_error(path, overwrite=False, inputs=()):
+    """Raise (on the calling rank alone) if ``path`` cannot be created as a result file.
+
+    Refused whatever ``overwrite`` says, since replacing them would destroy
+    something that is not a result: a directory-like path (an existing
+    directory, or a name ending in a slash, which a user means as a
+    directory), anything existing that is not a regular file (``/dev/null``,
+    a pipe, a socket: HDF5 cannot write them) and any of ``inputs``, a mapping
+    ``{description: path}`` of the files the run reads (the scene file, the
+    topography), which it would overwrite before reading.  Then
+    :class:`ResultExistsError` if it exists and ``overwrite`` is false,
+    FileNotFoundError if its directory does not exist, PermissionError if the
+    directory is not writable (read-only file system, permissions).  ``path``
+    may be the string as the user typed it (a trailing slash is seen then).
+    """
+    raw = os.fspath(path)
+    path = Path(raw)
+    if raw.endswith((os.sep, os.sep + ".", os.sep + "..")) or raw in (".", ".."):
+        raise IsADirectoryError(f"output path {raw} names a directory; give a file name, "
+                                f"e.g. {path / 'result.h5'}")
+    if path.is_dir():  # before the existence test, whose message would call it a file
+        raise IsADirectoryError(f"output path {path} is a directory; give a file name")
+    if path.exists() and not path.is_file():
+        raise OutputPathError(f"output path {path} is not a regular file (a device, pipe or "
+                              f"socket); a result must be a regular file: choose another --output")
+    for what, other in dict(inputs or {}).items():
+        if other and path.exists() and Path(other).exists() and os.path.samefile(path, other):
+            raise OutputPathError(f"output path {path} is the {what} ({other}), which the run "
+                                  f"reads; --overwrite or not, it is not replaced: choose "
+                                  f"another --output")
+    if path.exists() and not overwrite:
+        raise ResultExistsError(
+            f"refusing to overwrite the existing result file {path}; "
+            f"pass --overwrite to replace it, or choose another --output")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        why = "is not a directory" if parent.exists() else "does not exist"
+        raise FileNotFoundError(f"cannot create result file {path}: directory {parent} {why}")
+    if not os.access(parent, os.W_OK | os.X_OK):  # EROFS counts, even for root
+        raise PermissionError(f"cannot create result file {path}: directory {parent} "
+                              f"is not writable (read-only file system or permissions)")
+
+
+def existing_result(path):
+    """The root attributes of the result file ``path``, read by the calling rank alone.
+
+    For the decision whether an existing output is this scene's result: raises
+    :class:`ResultExistsError` saying why it is not one at all -- not readable
+    as HDF5 (truncated, e.g. by a job killed while creating it, or another
+    format), or HDF5 without petgap's provenance -- so that a refusal always
+    says why.
+    """
+    try:
+        attrs = root_attributes(path)
+    except OSError as exc:
+        raise ResultExistsError(
+            f"refusing to overwrite {path}: it exists but is not a readable HDF5 file "
+            f"(truncated, e.g. by a run killed while creating it, or another format: {exc}); "
+            f"pass --overwrite to replace it, or choose another --output") from None
+    if "petgap_version" not in attrs:
+        raise ResultExistsError(
+            f"refusing to overwrite {path}: it is an HDF5 file but not a petgap result (no "
+            f"petgap_version attribute); pass --overwrite to replace it, or choose another "
+            f"--output")
+    return {k: (v.decode() if isinstance(v, bytes) else v.item() if isinstance(v, np.generic)
+                else v) for k, v in attrs.items()}
 
 
 #: Bytes a write must leave free beyond its raw data, for HDF5 metadata (object

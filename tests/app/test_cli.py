@@ -143,9 +143,24 @@ def test_existing_output_is_not_overwritten(comm, mpi_tmp_path, run_cli):
     proc = run_cli(["petgap", "run", scene, "--output", out], ranks=2)
     assert proc.returncode == 0, proc.stderr
     before = out.read_bytes()
+    # the same scene again: its result is complete, nothing to do, no error, no banner
     proc = run_cli(["petgap", "run", scene, "--output", out], ranks=2)
+    assert proc.returncode == 0, proc.stderr
+    assert f"{out} is complete" in proc.stdout and "nothing to do" in proc.stdout
+    assert proc.stderr == ""
+    assert out.read_bytes() == before
+    # another scene: refused, naming the difference
+    other = write(comm, mpi_tmp_path / "other.toml", SCENE.replace("seed = 3", "seed = 5"))
+    proc = run_cli(["petgap", "run", other, "--output", out], ranks=2)
     assert proc.returncode == 2
     assert str(out) in proc.stderr and "--overwrite" in proc.stderr
+    assert f"different scene (surface.seed = 3 in the file, 5 in {other})" in proc.stderr
+    assert "MPI_ABORT" not in proc.stderr and "Traceback" not in proc.stderr
+    assert out.read_bytes() == before
+    # the same values written differently (a comment) are the same scene
+    same = write(comm, mpi_tmp_path / "same.toml", "# the same scene\n" + SCENE)
+    proc = run_cli(["petgap", "run", same, "--output", out, "-q"], ranks=2)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
     assert out.read_bytes() == before
     time.sleep(1.1)  # a new start_time
     proc = run_cli(["petgap", "run", scene, "--output", out, "--overwrite"], ranks=2)

@@ -399,9 +399,12 @@ def test_bad_input_is_one_clean_error(comm, shared):
 
 
 def test_existing_output_is_never_overwritten(comm, shared, reference):
-    """A finished result of the same scene, an interrupted result of another scene and a
-    file that is not a result at all are each refused (exit 2, the path and --overwrite
-    named), and left byte-identical."""
+    """Without --overwrite an existing output is never replaced, and the outcome says why:
+    this scene's finished result is a no-op that says so (exit 0, no banner); an
+    interrupted result of another scene names the first differing key with both values;
+    a truncated result, a file that is not HDF5 and an HDF5 file that is not a petgap
+    result are each refused with that reason (exit 2, the path and --overwrite named).
+    Every file is left byte-identical."""
     d = shared / "existing"
 
     def prepare():
@@ -412,19 +415,80 @@ def test_existing_output_is_never_overwritten(comm, shared, reference):
         shutil.copy(reference["path"], d / "other.h5")
         with h5py.File(d / "other.h5", "r+") as f:  # another scene's interrupted run
             f.attrs["scene"] = SWEEP.replace("seed = 3", "seed = 4")
+            f.attrs["scene_resolved"] = f.attrs["scene_resolved"].replace('"seed":3',
+                                                                          '"seed":4')
             f.attrs["complete"] = np.bool_(False)
+        whole = Path(reference["path"]).read_bytes()
+        (d / "truncated.h5").write_bytes(whole[:len(whole) // 3])
         (d / "foreign.h5").write_bytes(b"somebody else's data\n")
-        return {name: (d / f"{name}.h5").read_bytes() for name in ("finished", "other", "foreign")}
+        with h5py.File(d / "alien.h5", "w") as f:
+            f["data"] = np.zeros(3)
+        return {name: (d / f"{name}.h5").read_bytes()
+                for name in ("finished", "other", "truncated", "foreign", "alien")}
     before = wait_for_root(prepare)
     outcomes = run_many([(_mpirun(["petgap", "run", d / "sweep.toml", "-o", d / f"{name}.h5"]),
                           d / f"{name}.h5") for name in before], timeout=60)
     after = wait_for_root(lambda: {name: (d / f"{name}.h5").read_bytes() for name in before})
+    why = {"other": f"different scene (surface.seed = 4 in the file, 3 in {d / 'sweep.toml'})",
+           "truncated": "not a readable HDF5 file (truncated",
+           "foreign": "not a readable HDF5 file",
+           "alien": "not a petgap result"}
     for name, proc in zip(before, outcomes):
-        assert not proc["hung"] and proc["returncode"] == 2, (name, proc["stderr"])
+        assert not proc["hung"] and proc["leftovers"] == [], name
+        assert after[name] == before[name], name
+        assert "MPI_ABORT" not in proc["stderr"] and "Traceback" not in proc["stderr"]
+        if name == "finished":
+            assert proc["returncode"] == 0, proc["stderr"]
+            assert f"{d / name}.h5 is complete" in proc["stdout"]
+            assert "nothing to do" in proc["stdout"]
+            assert "error" not in proc["stderr"] and "Primary job" not in proc["stderr"]
+            assert "making the surface" not in proc["stdout"]
+            continue
+        assert proc["returncode"] == 2, (name, proc["stderr"])
         assert proc["stderr"].count("petgap: error:") == 1
         assert f"{d / name}.h5" in proc["stderr"] and "--overwrite" in proc["stderr"]
+        assert why[name] in proc["stderr"], (name, proc["stderr"])
+
+
+def test_output_that_can_never_be_a_result(comm, shared):
+    """The scene file itself, the topography file, a device and a directory-like path
+    (trailing slash, existing directory) are refused as outputs, --overwrite or not:
+    exit 2, one error naming the path and why, before anything is made, nothing
+    changed."""
+    d = shared / "never"
+
+    def prepare():
+        d.mkdir()
+        (d / "small.toml").write_text(SMALL)
+        np.save(d / "heights.npy", np.random.default_rng(2).standard_normal((32, 32)))
+        (d / "file.toml").write_text(FILE_SCENE.format(path="heights.npy", extra=""))
+        (d / "link.h5").symlink_to(d / "small.toml")
+        (d / "sub").mkdir()
+        return {p.name: p.read_bytes() for p in (d / "small.toml", d / "heights.npy")}
+    before = wait_for_root(prepare)
+    small, file_scene = d / "small.toml", d / "file.toml"
+    cases = [  # (scene, output, extra args, fragments of the message)
+        (small, small, ["--overwrite"], [f"output path {small} is the scene file"]),
+        (small, d / "link.h5", [], [f"output path {d / 'link.h5'} is the scene file"]),
+        (file_scene, d / "heights.npy", ["--overwrite"],
+         [f"output path {d / 'heights.npy'} is the topography file (surface.path)"]),
+        (small, "/dev/null", [], ["/dev/null is not a regular file"]),
+        (small, "/dev/null", ["--overwrite"], ["/dev/null is not a regular file"]),
+        (small, f"{d / 'newdir'}/", ["--overwrite"], [f"{d / 'newdir'}/ names a directory"]),
+        (small, d / "sub", [], [f"{d / 'sub'} is a directory"]),
+    ]
+    outcomes = run_many([(_mpirun(["petgap", "run", scene, "-o", out] + extra), str(out))
+                         for scene, out, extra, _ in cases], timeout=60)
+    after = wait_for_root(lambda: {name: (d / name).read_bytes() for name in before})
+    assert after == before
+    assert wait_for_root(lambda: not (d / "newdir").exists())
+    for (scene, out, extra, fragments), proc in zip(cases, outcomes):
+        err = proc["stderr"]
+        assert not proc["hung"] and proc["returncode"] == 2, (out, extra, err)
+        assert err.count("petgap: error:") == 1 and "Traceback" not in err, err
+        assert all(f in err for f in fragments), (fragments, err)
+        assert "making the surface" not in proc["stdout"]
         assert proc["leftovers"] == []
-        assert after[name] == before[name], name
 
 
 def test_unwritable_output_directory(comm, shared):
