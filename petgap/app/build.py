@@ -17,6 +17,8 @@ A scene made in code works as one read from a file::
 """
 import contextlib
 import functools
+import math
+import resource
 from dataclasses import dataclass, field
 
 from mpi4py import MPI
@@ -103,6 +105,97 @@ def check_options(scene, petsc_args=(), strict=False, log=None):
         (log or get_logger("build")).warning(
             "PETSc option %s is not read by petgap and is ignored%s; petgap run --strict "
             "makes this an error", u, hint)
+
+
+#: Peak bytes per grid point of a run, for the estimate before anything is allocated
+#: (docs/benchmarks.md, "Memory per point": 62-84 measured for a pcg-pressure solve,
+#: 87 at 8192^2; a surface-only run holds the FFT buffers and the topography).
+BYTES_PER_POINT_SOLVE = 90
+BYTES_PER_POINT_SURFACE = 40
+#: The most points of a rank's (padded) slab: the kernels index it with 32-bit integers.
+MAX_SLAB_POINTS = 2**31 - 1
+
+
+def _meminfo_available():
+    """MemAvailable of /proc/meminfo in bytes, or None where there is none."""
+    try:
+        for line in open("/proc/meminfo"):
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _address_space_left():
+    """Bytes this process may still map under RLIMIT_AS (``ulimit -v``), or None if unlimited."""
+    limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+    if limit == resource.RLIM_INFINITY:
+        return None
+    try:
+        for line in open("/proc/self/status"):
+            if line.startswith("VmSize:"):
+                return limit - int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return limit
+
+
+def _gib(nbytes):
+    return f"{nbytes / 2**30:.3g} GiB"
+
+
+def check_size(scene, comm, solve=True):
+    """Refuse a grid that cannot run on ``comm``, before anything is allocated (collective).
+
+    A :class:`~petgap.io.scene.SceneError` naming ``grid.nx``/``grid.ny`` if a
+    rank's slab exceeds the kernels' 32-bit index range, or if the estimated
+    peak memory of a rank (:data:`BYTES_PER_POINT_SOLVE` or
+    :data:`BYTES_PER_POINT_SURFACE` per point of its slab) exceeds what it
+    has: its share of the node's MemAvailable or what its address-space
+    limit (``ulimit -v``) leaves.  The message gives the estimate, both
+    limits and what to do.  Every rank looks at its own node and limits; the
+    worst rank's verdict is every rank's.
+    """
+    nx, ny, size = scene.grid.nx, scene.grid.ny, comm.size
+    rows = -(-nx // size)
+    row_points = 2 * (ny // 2 + 1)  # the padded real slab of the r2c transform
+    if rows * row_points > MAX_SLAB_POINTS:
+        most_rows = MAX_SLAB_POINTS // row_points
+        fix = (f"run on at least {-(-nx // most_rows)} ranks, or use a smaller grid"
+               if most_rows >= 1 else "use a smaller grid.ny")
+        raise SceneError(
+            f"grid.nx = {nx}, grid.ny = {ny}: a rank's slab of {rows} x {ny} points on {size} "
+            f"rank{'s' if size > 1 else ''} is beyond the {MAX_SLAB_POINTS} points petgap's "
+            f"kernels can index; allowed: at most {most_rows} rows of {ny} per rank: {fix}")
+    per_point = BYTES_PER_POINT_SOLVE if solve else BYTES_PER_POINT_SURFACE
+    need = rows * ny * per_point
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED)
+    on_node = node.size
+    node.Free()
+    available = _meminfo_available()
+    share = None if available is None else available // on_node
+    left = _address_space_left()
+    limits = [x for x in (share, left) if x is not None]
+    short = bool(limits) and need > min(limits)
+    verdicts = comm.allgather((short, need, share, left, on_node))
+    worst = [v for v in verdicts if v[0]]
+    if not worst:
+        return need
+    _, need, share, left, on_node = worst[0]
+    have = []
+    if share is not None:
+        have.append(f"MemAvailable {_gib(share * on_node)} on its node shared by {on_node} "
+                    f"rank{'s' if on_node > 1 else ''} ({_gib(share)} each)")
+    if left is not None:
+        have.append(f"{_gib(left)} of address space left under its limit (ulimit -v)")
+    ranks = math.ceil(size * need / max(1, min(x for x in (share, left) if x is not None)))
+    raise SceneError(
+        f"grid.nx = {nx}, grid.ny = {ny}: a run {'solving' if solve else 'making'} this "
+        f"grid needs about {_gib(need)} per rank on {size} rank{'s' if size > 1 else ''} "
+        f"({per_point} bytes per point of a {rows} x {ny} slab), more than a rank has: "
+        f"{'; '.join(have)}; use more ranks (about {ranks}, on more nodes), a smaller grid, "
+        f"or raise the limit")
 
 
 def _is_number(text):
@@ -219,12 +312,14 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
     """
     comm = MPI.COMM_WORLD if comm is None else comm
     check_options(scene, petsc_args, strict=strict, log=log)
+    steps = protocol.plan(scene)
+    check_size(scene, comm, solve=bool(steps))
     with _timed(log, f"planning FFTs ({scene.solver.planner})"):
         grid = make_grid(scene, comm)
     with _timed(log, "making the surface"):
         topography = surface(grid) if surface is not None else make_surface(scene, grid)
     args = list(scene.solver.petsc_args()) + list(petsc_args)
-    model = Model(scene=scene, grid=grid, topography=topography, steps=protocol.plan(scene),
+    model = Model(scene=scene, grid=grid, topography=topography, steps=steps,
                   petsc_args=args, options=petsc_options_dict(args))
     if not model.steps:
         return model

@@ -376,14 +376,38 @@ def _keys(section_cls):
 
 
 # --------------------------------------------------------------- the sections
+#: The largest ``grid.nx`` or ``grid.ny``: the FFT and contact kernels index a
+#: rank's slab with 32-bit integers (the slab limit per rank is checked when a
+#: run is built, see :func:`petgap.app.build.check_size`).
+MAX_PIXELS = 2**31 - 1
+_LARGEST = 1.7976931348623157e308
+
+
 @dataclass(frozen=True)
 class GridSection:
     """The periodic grid: ``nx x ny`` pixels of size ``a0``; the system is ``nx a0 x ny a0``."""
-    nx: int = key(Int(minimum=1), REQUIRED, "number of pixels along x (the distributed axis)")
+    nx: int = key(Int(minimum=1), REQUIRED, "number of pixels along x (the distributed axis), "
+                  f"at most {MAX_PIXELS}")
     ny: int = key(Int(minimum=1), Derived(lambda v, ctx: v["nx"], "nx"),
-                  "number of pixels along y")
+                  f"number of pixels along y, at most {MAX_PIXELS}")
     a0: float = key(Float(minimum=0, min_open=True), 1.0,
                     "pixel size, in the length unit of the run")
+
+    @staticmethod
+    def _check(values, ctx, problems):
+        nx, ny, a0 = values["nx"], values["ny"], values["a0"]
+        for name, n in (("nx", nx), ("ny", ny)):
+            if n > MAX_PIXELS and (name == "nx" or values.get("_given_ny")):  # not ny = nx
+                problems.append((name, n, "is beyond the index range of petgap's kernels "
+                                 "(32-bit)", f"an integer in [1, {MAX_PIXELS}]"))
+        if max(nx, ny) > MAX_PIXELS:
+            return
+        if not math.isfinite(2 * math.pi / a0):
+            problems.append(("a0", a0, "is so small that the largest wavevector 2 pi / a0 "
+                             "overflows", f"a0 >= {2 * math.pi / _LARGEST:.3g}"))
+        elif not math.isfinite(max(nx, ny) * a0):
+            problems.append(("a0", a0, f"is so large that the system size {max(nx, ny)} a0 "
+                             f"overflows", f"a0 <= {_LARGEST / max(nx, ny):.3g}"))
 
     @property
     def shape(self):
@@ -445,6 +469,11 @@ class SurfaceSection:
             return
         grid = ctx.get("grid")
         lmin, lmax = values.get("lambda_min"), values.get("lambda_max")
+        for name, length in (("lambda_min", lmin), ("lambda_max", lmax)):
+            if isinstance(length, float) and not math.isfinite(2 * math.pi / length):
+                problems.append((name, length, f"is so small that the wavevector 2 pi / {name} "
+                                 f"overflows", f"{name} >= {2 * math.pi / _LARGEST:.3g}"))
+                return
         if grid is not None and isinstance(lmin, float) and lmin < 2 * grid.a0:
             problems.append(("lambda_min", lmin, "is below the Nyquist wavelength",
                              f"lambda_min >= 2 a0 = {2 * grid.a0:g}"))

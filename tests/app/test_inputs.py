@@ -6,12 +6,15 @@ user sees (``petgap run`` in a subprocess).
 """
 import io
 import logging
+import subprocess
+import time
 from pathlib import Path
 
 import pytest
 
+from conftest import clean_env, wait_for_root
 from conftest import write_shared as write
-from petgap.app.build import check_options
+from petgap.app.build import BYTES_PER_POINT_SOLVE, check_options, check_size
 from petgap.io.scene import Scene, SceneError
 from petgap.solvers.tao import check_petsc_options
 
@@ -103,3 +106,54 @@ def test_petsc_options_on_the_command_line(comm, mpi_tmp_path, run_cli):
     assert ("-petgap_coarse_start 'perhaps' (solver.petsc_options): is not a boolean"
             in proc.stderr), proc.stderr
     assert not Path(mpi_tmp_path / "bad.h5").exists()
+
+
+def test_slab_beyond_the_index_range_names_the_grid(comm):
+    scene = Scene.from_text(SCENE.format(solver="").replace("nx = 32", "nx = 46341"), comm)
+    if comm.size == 1:
+        with pytest.raises(SceneError, match=r"grid.nx = 46341, grid.ny = 46341: a rank's slab "
+                                             r".*run on at least 2 ranks"):
+            check_size(scene, comm)
+    huge = Scene.from_text(SCENE.format(solver="").replace("nx = 32", "nx = 1000000000"),
+                           comm)
+    with pytest.raises(SceneError, match=r"grid.nx = 1000000000, grid.ny = 1000000000: .*"
+                                         r"beyond the 2147483647 points"):
+        check_size(huge, comm)
+
+
+def test_memory_estimate_refuses_what_cannot_fit(comm):
+    """32768^2 needs about 45 GiB per rank on two ranks: more than any test machine has."""
+    scene = Scene.from_text(SCENE.format(solver="").replace("nx = 32", "nx = 32768"), comm)
+    with pytest.raises(SceneError) as info:
+        check_size(scene, comm)
+    message = str(info.value)
+    gib = 32768 * 32768 // comm.size * BYTES_PER_POINT_SOLVE / 2**30
+    assert f"needs about {gib:.3g} GiB per rank" in message, message
+    assert "MemAvailable" in message and "more ranks" in message and "smaller grid" in message
+    small = Scene.from_text(SCENE.format(solver=""), comm)
+    assert check_size(small, comm) == 32 * 32 // comm.size * BYTES_PER_POINT_SOLVE
+
+
+def test_memory_refusal_under_an_address_space_limit(comm, mpi_tmp_path):
+    """``ulimit -v`` of about 2 GB and a 32768^2 scene: exit 2 within seconds, the message
+    gives the estimate, MemAvailable, the address-space limit and what to do, and no
+    result file is made (run as a user runs it, under mpirun)."""
+    scene = write(comm, mpi_tmp_path / "big.toml",
+                  SCENE.format(solver="").replace("nx = 32", "nx = 32768"))
+    out = mpi_tmp_path / "big.h5"
+    command = f"ulimit -v 2000000; mpirun -n 2 --oversubscribe petgap run {scene} -o {out}"
+
+    def run():
+        start = time.monotonic()
+        proc = subprocess.run(["bash", "-c", command], capture_output=True, text=True,
+                              timeout=120, env=clean_env())
+        return proc, time.monotonic() - start
+    proc, seconds = wait_for_root(run)
+    assert proc.returncode == 2, proc.stderr
+    err = proc.stderr
+    assert err.count("petgap: error:") == 1 and "internal error" not in err, err
+    assert "grid.nx = 32768, grid.ny = 32768" in err and "GiB per rank on 2 ranks" in err
+    assert "MemAvailable" in err and "address space left under its limit (ulimit -v)" in err
+    assert "use more ranks" in err and "a smaller grid" in err
+    assert "planning FFTs" not in proc.stdout and not out.exists()
+    assert seconds < 30

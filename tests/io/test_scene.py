@@ -265,3 +265,23 @@ def test_describe_schema_lists_every_key():
         assert f"`{key}`" in table
     assert "min(Lx, Ly) / 2" in table
     assert all(line.count("|") - line.count("\\|") == 6 for line in table.splitlines())
+
+
+@pytest.mark.parametrize("text, shown", [
+    ("[grid]\nnx = 9223372036854775807\n",
+     "grid.nx = 9223372036854775807: is beyond the index range"),
+    ("[grid]\nnx = 64\nny = 2147483648\n", "grid.ny = 2147483648: is beyond the index range"),
+    ("[grid]\nnx = 64\na0 = 1e-320\n",
+     "grid.a0 = 1e-320: is so small that the largest wavevector 2 pi / a0 overflows"),
+    ("[grid]\nnx = 64\na0 = 1e307\n", "grid.a0 = 1e+307: is so large that the system size"),
+    ("[grid]\nnx = 64\n[surface]\nhurst = 0.7\nlambda_min = 1e-320\n",
+     "surface.lambda_min = 1e-320: is so small that the wavevector 2 pi / lambda_min"),
+])
+def test_absurd_grids_name_their_key(comm, text, shown):
+    """Sizes beyond the kernels' index range and pixel sizes whose wavevectors or system
+    size overflow are scene errors naming the key, not errors deep in the run."""
+    if "[surface]" not in text:
+        text += '[surface]\nhurst = 0.7\nlambda_min = "8 a0"\n'
+    message = error_of(comm, text)
+    assert shown in message and "allowed:" in message
+    assert message.count("\n") == 0  # one error, not its consequences
