@@ -5,6 +5,7 @@ the topography, then one group per step, each written as soon as it is solved,
 so that an interrupted run keeps every finished step and the same command
 continues it (:func:`run_scene`).  The command line is in :mod:`petgap.app.main`.
 """
+import hashlib
 import json
 import shlex
 import signal
@@ -102,6 +103,8 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
     provenance = {"scene": scene.text, "scene_path": str(Path(scene.path).resolve())
                   if scene.path else "", "scene_resolved": scene.to_json(),
                   "petsc_options": shlex.join(model.petsc_args)}
+    if scene.surface.kind == "file" and not resume:  # what a resume checks the file against
+        provenance["surface_sha256"] = root_decides(comm, lambda: file_sha256(scene.surface.path))
     if resume:  # every check passed (in build too): now the file is touched
         with ResultFile.open_for_resume(output, comm) as result:
             result.close(complete=False)
@@ -152,8 +155,27 @@ def _output_state(scene, output, comm, overwrite):
             raise ResultExistsError(
                 f"refusing to overwrite {output}: it holds the result of a different scene "
                 f"({difference}); pass --overwrite to replace it, or choose another --output")
-        return "complete" if bool(attrs.get("complete", False)) else "resume"
+        complete = bool(attrs.get("complete", False))
+        stored = attrs.get("surface_sha256")
+        if not complete and stored is not None and scene.surface.kind == "file":
+            now = file_sha256(scene.surface.path)
+            if now != stored:
+                raise ResultExistsError(
+                    f"refusing to continue {output}: the topography file {scene.surface.path} "
+                    f"(surface.path) changed since its finished steps were made (sha256 "
+                    f"{stored[:12]}... in the result, {now[:12]}... now); restore the file, "
+                    f"or pass --overwrite to start again")
+        return "complete" if complete else "resume"
     return root_decides(comm, decide)
+
+
+def file_sha256(path):
+    """The SHA-256 of a file's content, hex (read in 1 MiB blocks)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def scene_difference(attrs, scene):

@@ -477,8 +477,13 @@ def test_output_that_can_never_be_a_result(comm, shared):
         (small, f"{d / 'newdir'}/", ["--overwrite"], [f"{d / 'newdir'}/ names a directory"]),
         (small, d / "sub", [], [f"{d / 'sub'} is a directory"]),
     ]
-    outcomes = run_many([(_mpirun(["petgap", "run", scene, "-o", out] + extra), str(out))
-                         for scene, out, extra, _ in cases], timeout=60)
+    # each job's token (to find leftover processes) is its own copy of the scene: the
+    # output path (/dev/null) may be in other processes' command lines
+    copies = wait_for_root(lambda: [
+        shutil.copy(scene, d / f"job{i}-{scene.name}") if out not in (small, d / "link.h5")
+        else scene for i, (scene, out, _, _) in enumerate(cases)])
+    outcomes = run_many([(_mpirun(["petgap", "run", copy, "-o", out] + extra), copy)
+                         for copy, (_, out, extra, _) in zip(copies, cases)], timeout=60)
     after = wait_for_root(lambda: {name: (d / name).read_bytes() for name in before})
     assert after == before
     assert wait_for_root(lambda: not (d / "newdir").exists())
@@ -620,3 +625,43 @@ def test_full_disk_keeps_finished_steps_and_resumes(comm, shared, reference, whe
         assert f"writing {out} failed" in proc["stderr"]
     k = assert_prefix(full, 1, reference)
     assert_resumed(again, final, reference, already=k)
+
+
+def test_resume_refuses_a_changed_topography_file(comm, shared):
+    """An interrupted run from a topography file is continued only while that file is
+    what its finished steps were made from (the SHA-256 stored at creation): after the
+    file changed, the same command refuses, naming the file, and leaves the result."""
+    d = shared / "changed"
+
+    def prepare():
+        d.mkdir()
+        np.save(d / "heights.npy", np.random.default_rng(5).standard_normal((32, 32)))
+        (d / "file.toml").write_text(FILE_SCENE.format(path="heights.npy", extra=""))
+    wait_for_root(prepare)
+    args = _mpirun(["petgap", "run", d / "file.toml", "-o", d / "r.h5"])
+    (proc,) = run_many([(args, d / "r.h5")])
+    assert proc["returncode"] == 0, proc["stderr"]
+
+    def interrupted():
+        with h5py.File(d / "r.h5", "r+") as f:  # as if killed before the last step
+            f.attrs["complete"] = np.bool_(False)
+            del f["step_0000"]
+            stored = f.attrs["surface_sha256"]
+        return stored, (d / "r.h5").read_bytes()
+    stored, before = wait_for_root(interrupted)
+    assert len(stored) == 64
+    same, = run_many([(args, d / "r.h5")])  # unchanged file: continued
+    assert same["returncode"] == 0 and "continuing an interrupted run" in same["stdout"]
+
+    def change():
+        (d / "r.h5").write_bytes(before)
+        h = np.load(d / "heights.npy")
+        h[0, 0] += 1
+        np.save(d / "heights.npy", h)
+    wait_for_root(change)
+    proc, = run_many([(args, d / "r.h5")])
+    err = proc["stderr"]
+    assert proc["returncode"] == 2 and err.count("petgap: error:") == 1, err
+    assert f"topography file {d / 'heights.npy'} (surface.path) changed" in err
+    assert "--overwrite" in err and "making the surface" not in proc["stdout"]
+    assert wait_for_root(lambda: (d / "r.h5").read_bytes()) == before
