@@ -3,7 +3,8 @@
 Modules: :mod:`.contact_geometry` (contact set, perimeter, ``d_rep``, ``g0``),
 :mod:`.gap_distribution` (``p(g)``, its collapse onto Eq. 13, power-law fits,
 the near-contact area of Eq. 14), :mod:`.adhesion` (the attractive force, Eqs.
-15-16, ``1 / kappa_att``), :mod:`.of_solution` (the same applied to a problem and
+15-16, ``1 / kappa_att``), :mod:`.patches` (the connected contact
+patches, their areas and perimeters), :mod:`.of_solution` (the same applied to a problem and
 its solution) and :mod:`._slabs` (slab bookkeeping shared by them).
 
 Every function works on a :class:`~petgap.parallel.grid.Grid`'s row slabs, ``(nx_local, ny)``,
@@ -53,6 +54,7 @@ from petgap.analysis.gap_distributions import (  # noqa: F401  (the package's AP
     FIT_SLOPE_WINDOW, FIT_MIN_DECADES, FIT_MIN_COUNT, FIT_SIGMAS)
 from petgap.analysis.adhesion import (  # noqa: F401  (the package's API)
     attractive_force_measured, attractive_force_eq16, inverse_kappa_att, fig4_integrand, AttractiveForce, Eq16Force, GAMMA_2_3)
+from petgap.analysis.patches import contact_patches, Patches  # noqa: F401  (the package's API)
 from petgap.analysis.of_solution import (  # noqa: F401  (the package's API)
     contact_statistics_of, gap_distribution_of, attractive_force_of, near_contact_area_of)
 
@@ -64,6 +66,6 @@ __all__ = ["contact_mask", "resolve_gap_tolerance", "GAP_ROUND_OFF", "perimeter"
            "inverse_kappa_att", "fig4_integrand", "PerimeterResult", "ContactStatistics",
            "GapDistribution", "PowerLawFit", "NearContactArea", "AttractiveForce",
            "Eq16Force", "GAMMA_2_3", "contact_statistics_of", "gap_distribution_of",
-           "attractive_force_of", "near_contact_area_of", "BINS_PER_DECADE", "DEFAULT_RANGE",
+           "attractive_force_of", "near_contact_area_of", "contact_patches", "Patches", "BINS_PER_DECADE", "DEFAULT_RANGE",
            "FIT_RESOLUTION_FACTOR", "FIT_X_MAX", "FIT_SLOPE_BAND", "FIT_SLOPE_WINDOW",
            "FIT_MIN_DECADES", "FIT_MIN_COUNT", "FIT_SIGMAS"]
