@@ -3,7 +3,9 @@
 Modules: :mod:`.contact_geometry` (contact set, perimeter, ``d_rep``, ``g0``),
 :mod:`.gap_distribution` (``p(g)``, its collapse onto Eq. 13, power-law fits,
 the near-contact area of Eq. 14), :mod:`.adhesion` (the attractive force, Eqs.
-15-16, ``1 / kappa_att``), :mod:`.patches` (the connected contact
+15-16, ``1 / kappa_att``), :mod:`.load_curves` (``kappa_rep`` and the exponential mean-gap law
+of a load sweep), :mod:`.maps` (fields
+block-averaged for display), :mod:`.patches` (the connected contact
 patches, their areas and perimeters), :mod:`.of_solution` (the same applied to a problem and
 its solution) and :mod:`._slabs` (slab bookkeeping shared by them).
 
@@ -55,6 +57,8 @@ from petgap.analysis.gap_distributions import (  # noqa: F401  (the package's AP
 from petgap.analysis.adhesion import (  # noqa: F401  (the package's API)
     attractive_force_measured, attractive_force_eq16, inverse_kappa_att, fig4_integrand, AttractiveForce, Eq16Force, GAMMA_2_3)
 from petgap.analysis.patches import contact_patches, Patches  # noqa: F401  (the package's API)
+from petgap.analysis.load_curves import fit_kappa_rep, fit_gap_law, KappaFit, GapLawFit, KAPPA_C_MAX  # noqa: F401  (the package's API)
+from petgap.analysis.maps import block_map, decimation_factor, Map, MAX_PIXELS  # noqa: F401  (the package's API)
 from petgap.analysis.of_solution import (  # noqa: F401  (the package's API)
     contact_statistics_of, gap_distribution_of, attractive_force_of, near_contact_area_of)
 
@@ -66,6 +70,8 @@ __all__ = ["contact_mask", "resolve_gap_tolerance", "GAP_ROUND_OFF", "perimeter"
            "inverse_kappa_att", "fig4_integrand", "PerimeterResult", "ContactStatistics",
            "GapDistribution", "PowerLawFit", "NearContactArea", "AttractiveForce",
            "Eq16Force", "GAMMA_2_3", "contact_statistics_of", "gap_distribution_of",
-           "attractive_force_of", "near_contact_area_of", "contact_patches", "Patches", "BINS_PER_DECADE", "DEFAULT_RANGE",
+           "attractive_force_of", "near_contact_area_of", "contact_patches", "Patches",
+           "block_map", "decimation_factor", "Map", "MAX_PIXELS",
+           "fit_kappa_rep", "fit_gap_law", "KappaFit", "GapLawFit", "KAPPA_C_MAX", "BINS_PER_DECADE", "DEFAULT_RANGE",
            "FIT_RESOLUTION_FACTOR", "FIT_X_MAX", "FIT_SLOPE_BAND", "FIT_SLOPE_WINDOW",
            "FIT_MIN_DECADES", "FIT_MIN_COUNT", "FIT_SIGMAS"]
