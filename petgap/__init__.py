@@ -47,6 +47,9 @@ importing only from those before it:
     :func:`attractive_force_of`, :func:`near_contact_area_of` on a problem and
     its solution; :func:`contact_statistics`, :func:`gap_distribution`,
     :func:`collapse`, :func:`fit_power_law`, :func:`attractive_force_measured`,
+    :func:`contact_patches` (patch count, areas, perimeters), :func:`block_map`
+    (a field block-averaged for display), :func:`fit_kappa_rep` and
+    :func:`fit_gap_law` (the laws of a load sweep),
     ... on a grid and field slabs (:mod:`petgap.analysis` has them all).
 ``petgap.reference_solutions``
     Westergaard, Hertz and Johnson closed forms (the module itself).
@@ -70,7 +73,8 @@ from petgap import analysis, reference_solutions  # noqa: E402
 from petgap.analysis import (  # noqa: E402
     attractive_force_eq16, attractive_force_measured, attractive_force_of, collapse,
     contact_statistics, contact_statistics_of, fit_power_law, gap_distribution,
-    gap_distribution_of, inverse_kappa_att, near_contact_area, near_contact_area_of)
+    gap_distribution_of, inverse_kappa_att, near_contact_area, near_contact_area_of,
+    contact_patches, block_map, fit_kappa_rep, fit_gap_law)
 from petgap.app import ContactResult, run_scene  # noqa: E402
 from petgap.app.contact import contact  # noqa: E402  (petgap.app keeps the module's name)
 from petgap.io import Scene, SceneError  # noqa: E402
@@ -100,7 +104,8 @@ __all__ = [
     "analysis", "contact_statistics_of", "gap_distribution_of", "attractive_force_of",
     "near_contact_area_of", "contact_statistics", "gap_distribution", "collapse",
     "fit_power_law", "near_contact_area", "attractive_force_measured",
-    "attractive_force_eq16", "inverse_kappa_att",
+    "attractive_force_eq16", "inverse_kappa_att", "contact_patches", "block_map",
+    "fit_kappa_rep", "fit_gap_law",
     # reference solutions
     "reference_solutions",
     # app

@@ -15,7 +15,8 @@ set -euo pipefail
 
 packages=(python3-petsc4py python3-mpi4py python3-h5py-mpi libfftw3-mpi-dev libfftw3-dev
           openmpi-bin libopenmpi-dev python3-numpy python3-scipy python3-matplotlib
-          python3-pytest cython3 python3-dev python3-venv build-essential)
+          python3-pytest cython3 python3-dev python3-venv build-essential
+          chromium python3-xarray python3-h5netcdf)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -22,10 +22,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from mpi4py import MPI
-from scipy import ndimage
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-
 from petgap.analysis._slabs import check_fields, fetch_rows, global_shape, local_rows, pixel
 
 
@@ -99,6 +95,11 @@ def contact_patches(grid, mask, *, periodic=True):
         Join patches across the cell's edges (a periodic solution) or not (a map with
         a free boundary).
     """
+    # deferred: importing SciPy changes warning filters, which `import petgap` must not do
+    from scipy import ndimage
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
     comm = grid.comm
     mask = check_fields(grid, mask=mask)["mask"]
     nx, ny = global_shape(grid)

@@ -120,6 +120,7 @@ from mpi4py import MPI  # noqa: E402
 
 from petgap import analysis  # noqa: E402
 from petgap.app.argtypes import positive_float, positive_int, root_parser  # noqa: E402
+from petgap.app import overview, report  # noqa: E402
 from petgap.app.figures import fig2_series, fig3_series, figure2, figure3, figure4  # noqa: E402
 from petgap.app.tables import plain, plain_rows, write_csv, write_json  # noqa: E402
 from petgap.io.results import ResultFile, read_attrs, read_field, step_name  # noqa: E402
@@ -127,7 +128,8 @@ from petgap.mechanics.interactions import ExponentialAdhesion  # noqa: E402
 from petgap.parallel.collective import root_decides  # noqa: E402
 from petgap.parallel.grid import DecompositionError, Grid  # noqa: E402
 from petgap.parallel.log import configure, report_failure  # noqa: E402
-from petgap.surfaces.statistics import statistics  # noqa: E402
+from petgap.surfaces.self_affine import psd_shape  # noqa: E402
+from petgap.surfaces.statistics import radial_psd, statistics  # noqa: E402
 from petgap._version import __version__
 
 #: Exit status of a user error.
@@ -160,7 +162,22 @@ COLUMNS = [
     "F_att", "F_att_noncontact", "F_att_eq16_printed", "F_att_eq16_exact",
     "inv_kappa_att", "inv_kappa_att_eq16_printed", "inv_kappa_att_eq16_exact",
     "c_solver", "kappa_rep_solver", "inv_kappa_att_solver",
+    "mean_gap", "patches", "patch_area_mean", "patch_area_max", "control", "control_value",
+    "solver", "converged", "reason", "iterations", "kkt_pressure", "kkt_gap", "wall_time",
 ]
+#: Solver status columns and the step attributes they come from.
+STATUS = {"control": ("solution.control", str), "control_value": ("solution.control_value", float),
+          "solver": ("solution.solver", str), "converged": ("solution.converged", bool),
+          "reason": ("solution.reason", str), "iterations": ("solution.iterations", int),
+          "kkt_pressure": ("solution.kkt_pressure", float), "kkt_gap": ("solution.kkt_gap", float),
+          "wall_time": ("solution.wall_time", float)}
+MANIFEST = "figures.json"
+PATCH_TABLE = "patches.csv"
+PATCH_COLUMNS = ["file", "step", "patch", "pixels", "area", "perimeter_pixel_edges",
+                 "first_pixel"]
+SURFACE_STEM = "surface-statistics"
+SURFACE_COLUMNS = ["file", "nx", "ny", "dx", "dy", "mean", "rms_height", "rms_slope",
+                   "rms_curvature", "kind", "hurst", "lambda_min", "lambda_max"]
 
 
 class PostError(ValueError):
@@ -276,10 +293,16 @@ class StepResult:
     y: np.ndarray
     adhesive: bool
     meta: dict = field(default_factory=dict)
+    patches: object = None
+    maps: object = None          # overview.StepMaps on the root rank, else None
 
 
-def analyse_step(result, index, args, grids, comm, log):
-    """Analyse step ``index`` of an open result file (collective)."""
+def analyse_step(result, index, args, grids, comm, log, surface=None):
+    """Analyse step ``index`` of an open result file (collective).
+
+    ``surface`` is the file's :class:`petgap.app.overview.SurfaceView` (its topography
+    map goes into the step's maps), if the file has a topography.
+    """
 
     f = result.file
     name = step_name(index)
@@ -315,15 +338,7 @@ def analyse_step(result, index, args, grids, comm, log):
     lmin, _ = attrs.find(["surface.lambda_min", "lambda_min"], "lambda_min", required=False)
     lmax, _ = attrs.find(["surface.lambda_max", "lambda_max"], "lambda_max", required=False)
 
-    key = (shape, dx, dy)
-    if key not in grids:
-        grids.clear()  # one grid at a time: its FFT buffers are 16 bytes per point
-        try:
-            grids[key] = Grid(shape, size=(shape[0] * dx, shape[1] * dy), comm=comm,
-                              planner="estimate", wisdom=False)
-        except DecompositionError as exc:
-            raise PostError(f"{where}: {exc}") from None
-    grid = grids[key]
+    grid = _grid(grids, shape, dx, dy, comm, where)
 
     slope, slope_source = attrs.find(["rms_slope", "statistics.rms_slope",
                                       "topography.statistics.rms_slope", "surface.rms_slope"],
@@ -348,6 +363,12 @@ def analyse_step(result, index, args, grids, comm, log):
     dist = analysis.gap_distribution(grid, gap, pressure, bins_per_decade=args.bins,
                                      gap_tolerance=tol)
     c, g0 = stats.contact_fraction, stats.g0
+    periodic, _ = attrs.find(["surface.periodic"], "periodicity", required=False, kind=bool)
+    mask = analysis.contact_mask(gap, pressure, tol)
+    patches = analysis.contact_patches(grid, mask, periodic=True if periodic is None else periodic)
+    maps = {} if surface is None else {"topography": surface.topography}
+    for field_name, values in (("gap", gap), ("pressure", pressure), ("contact", mask)):
+        maps[field_name] = analysis.block_map(grid, values, max_pixels=args.map_pixels)
     chain, _ = attrs.find(["plan.chain"], "chain", required=False, kind=str)
     ref_step, _ = attrs.find(["plan.reference_step"], "reference step", required=False, kind=int)
     ref_step = ref_step if ref_step is not None and ref_step >= 0 else None
@@ -364,7 +385,12 @@ def analyse_step(result, index, args, grids, comm, log):
                A_rep=stats.contact_area, P_rep=stats.perimeter,
                P_pixel_edges=stats.pixel_edge_length, d_rep=stats.mean_diameter, g0=g0,
                mean_pressure=stats.mean_pressure, kappa_rep=stats.kappa_rep,
-               zero_gap_fraction=dist.zero_gap_fraction, gap_tolerance=tol)
+               zero_gap_fraction=dist.zero_gap_fraction, gap_tolerance=tol,
+               mean_gap=grid.mean(gap), patches=patches.count,
+               patch_area_mean=float(np.mean(patches.areas)) if patches.count else None,
+               patch_area_max=float(np.max(patches.areas)) if patches.count else None)
+    for column, (attribute, convert) in STATUS.items():
+        row[column] = attrs.find([attribute], column, required=False, kind=convert)[0]
     x = y = np.empty(0)
     usable = 0 < c < 1 and math.isfinite(g0) and g0 > 0
     fit_note = None
@@ -435,7 +461,11 @@ def analyse_step(result, index, args, grids, comm, log):
              f", {row['exponent_fit_range']:.3f} over the {row['fit_range_source']} fit range "
              f"{row['fit_range_x_min']:.3g} .. {row['fit_range_x_max']:.3g}"
              if "exponent_fit_range" in finite else "")
-    return StepResult(row=row, distribution=dist, x=x, y=y, adhesive=adhesive, meta=meta)
+    title = f"{result.path}, {name}: {kind}" + (
+        f", {row['control']} = {row['control_value']:.4g}" if row["control"] else "")
+    step_maps = overview.StepMaps(maps, c, title) if comm.rank == 0 else None
+    return StepResult(row=row, distribution=dist, x=x, y=y, adhesive=adhesive, meta=meta,
+                      patches=patches, maps=step_maps)
 
 
 def solve_identity(result, index, attrs, kind, w, rho):
@@ -463,12 +493,107 @@ def solve_identity(result, index, attrs, kind, w, rho):
             float(value))
 
 
-def analyse_inputs(inputs, args, comm, log):
-    """Analyse every step asked for (collective); returns a list of StepResult."""
+def file_attributes(result):
+    """:class:`Attributes` of a result file itself (root, topography dataset, scene)."""
+    f = result.file
+    sources = [("root attributes", read_attrs(f))]
+    if "topography" in f:
+        sources.append(("topography dataset attributes", read_attrs(f["topography"])))
+    scene = sources[0][1].get("scene_resolved")
+    if scene:
+        try:
+            sources.append(("scene_resolved", _flatten(json.loads(scene))))
+        except (TypeError, ValueError):
+            raise PostError(f"{result.path}: root attribute 'scene_resolved' is not valid JSON") \
+                from None
+    return Attributes(str(result.path), sources)
+
+
+def analyse_surface(result, args, grids, comm):
+    """Statistics, PSD and topography map of a file's ``topography`` (collective), or None.
+
+    The PSD model is Eq. 5 of the paper for a generated self-affine surface, with
+    ``C0`` set so that the model summed over the grid's modes gives the measured
+    rms height (the normalisation of :func:`petgap.surfaces.statistics.radial_psd`,
+    ``mean(h^2) = (1 / A0) sum_q C(q)``).
+    """
+    f = result.file
+    if "topography" not in f:
+        return None
+    shape = tuple(int(n) for n in f["topography"].shape)
+    if len(shape) != 2:
+        raise PostError(f"{result.path}: 'topography' {shape} is not a 2D field")
+    attrs = file_attributes(result)
+    dx, _ = attrs.find(["grid.dx", "grid.a0", "a0"], "pixel size")
+    dy, _ = attrs.find(["grid.dy", "grid.a0", "a0"], "pixel size")
+    grid = _grid(grids, shape, dx, dy, comm, str(result.path))
+    heights = read_field(f, "topography", grid)
+    stats = statistics(grid, heights)
+    q, psd = radial_psd(grid, heights)
+    kind, _ = attrs.find(["surface.kind"], "surface kind", required=False, kind=str)
+    model, label = None, ""
+    if kind == "self-affine":
+        hurst, _ = attrs.find(["surface.hurst"], "Hurst exponent")
+        lmin, _ = attrs.find(["surface.lambda_min"], "lambda_min")
+        lmax, _ = attrs.find(["surface.lambda_max"], "lambda_max", required=False)
+        lmax = min(grid.Lx, grid.Ly) if lmax is None else lmax
+        q1, q2 = 2 * math.pi / lmax, 2 * math.pi / lmin
+        qm = grid.q_magnitude()
+        modes = float(np.sum(grid.hermitian_weight[:, None] * psd_shape(qm, hurst, q1, q2)))
+        modes = comm.allreduce(modes)
+        c0 = grid.area * stats.rms_height ** 2 / modes if modes > 0 else math.nan
+        model = c0 * psd_shape(q, hurst, q1, q2)
+        label = (f"Eq. 5: H = {hurst:g}, $\\lambda_{{min}}$ = {lmin:g}, "
+                 f"$\\lambda_{{max}}$ = {lmax:g}")
+    topo_map = analysis.block_map(grid, heights, max_pixels=args.map_pixels)
+    spectrum = {"q": q.tolist(), "C": psd.tolist(),
+                "model": None if model is None else model.tolist()}
+    row = {"file": str(result.path), "nx": shape[0], "ny": shape[1], "dx": dx, "dy": dy,
+           "mean": stats.mean, "rms_height": stats.rms_height, "rms_slope": stats.rms_slope,
+           "rms_curvature": stats.rms_curvature, "kind": kind,
+           "hurst": attrs.find(["surface.hurst"], "Hurst exponent", required=False)[0],
+           "lambda_min": attrs.find(["surface.lambda_min"], "lambda_min", required=False)[0],
+           "lambda_max": attrs.find(["surface.lambda_max"], "lambda_max", required=False)[0],
+           "psd": spectrum}
+    return overview.SurfaceView(statistics=stats, q=q, psd=psd, model=model, model_label=label,
+                                topography=topo_map, row=row)
+
+
+def _grid(grids, shape, dx, dy, comm, where):
+    key = (shape, dx, dy)
+    if key not in grids:
+        grids.clear()  # one grid at a time: its FFT buffers are 16 bytes per point
+        try:
+            grids[key] = Grid(shape, size=(shape[0] * dx, shape[1] * dy), comm=comm,
+                              planner="estimate", wisdom=False)
+        except DecompositionError as exc:
+            raise PostError(f"{where}: {exc}") from None
+    return grids[key]
+
+
+#: Root attributes of a result file shown in the report (provenance).
+PROVENANCE = ("petgap_version", "command_line", "scene_path", "start_time", "end_time",
+              "mpi_size", "hostname", "complete", "petsc_options", "scene")
+
+
+def analyse_inputs(inputs, args, comm, log, surfaces=None, provenance=None):
+    """Analyse every step asked for (collective); returns a list of StepResult.
+
+    If ``surfaces`` is a dict, each file's :class:`petgap.app.overview.SurfaceView`
+    (or None without a topography) is stored in it under the file's path; a file
+    without steps (a surface-only run) is then analysed for its surface alone.
+    """
     out, grids = [], {}
     for item in inputs:
         root_decides(comm, lambda: _check_result_file(item.path))
         with ResultFile.open(item.path, comm) as result:
+            surface = None
+            if surfaces is not None:
+                surface = analyse_surface(result, args, grids, comm)
+                surfaces[str(item.path)] = surface
+            if provenance is not None:
+                root = read_attrs(result.file)
+                provenance[str(item.path)] = {k: plain(root.get(k)) for k in PROVENANCE}
             if not result.complete:
                 log.warning("%s was not closed after a successful run (root attribute "
                             "'complete' is not True); using its complete steps", item.path)
@@ -483,7 +608,10 @@ def analyse_inputs(inputs, args, comm, log):
                                     f"(interrupted run); its fields may be missing or partial")
                 chosen = [item.step]
             else:
-                if not steps:
+                if not steps and surface is not None:
+                    log.info("%s: no step groups (a surface-only run): its surface only",
+                             item.path)
+                elif not steps:
                     raise PostError(f"{item.path}: no step groups ('step_0000', ...): a "
                                     f"surface-only run (control.kind = \"none\")?")
                 skipped = [s for s in steps if s not in done]
@@ -491,7 +619,7 @@ def analyse_inputs(inputs, args, comm, log):
                     log.warning("%s: skipping incomplete step(s) %s", item.path, skipped)
                 chosen = [s for s in steps if s in done]
             for index in chosen:
-                out.append(analyse_step(result, index, args, grids, comm, log))
+                out.append(analyse_step(result, index, args, grids, comm, log, surface))
     return out
 
 
@@ -501,7 +629,8 @@ def output_paths(args):
     d = args.output_dir
     return [d / f"{TABLE_STEM}.csv", d / f"{TABLE_STEM}.json",
             d / f"{FIG2_STEM}.{args.format}", d / f"{FIG3_STEM}.{args.format}",
-            d / f"{FIG4_STEM}.{args.format}"]
+            d / f"{FIG4_STEM}.{args.format}", d / MANIFEST, d / PATCH_TABLE,
+            d / f"{SURFACE_STEM}.csv", d / f"{SURFACE_STEM}.json", d / report.REPORT]
 
 
 def check_outputs(args):
@@ -517,7 +646,15 @@ def check_outputs(args):
     d.mkdir(parents=True, exist_ok=True)
 
 
-def write_tables(results, args, groups, fig2, fig3):
+SURFACE_CONVENTIONS = {
+    "rms_height, rms_slope, rms_curvature": "spectral (petgap.surfaces.statistics), the mean "
+                                            "removed; h0'' = sqrt(<(laplacian h)^2>) / 2",
+    "psd": "C(q) = A0 |h_q|^2 / N^2, radially averaged on logarithmic bins "
+           "(petgap.surfaces.statistics.radial_psd); model: Eq. 5 with C0 from the rms height",
+}
+
+
+def write_tables(results, args, groups, fig2, fig3, sweeps=None):
     """The CSV and JSON tables; ``fig2``, ``fig3`` are the drawn series (:func:`fig2_series`,
     :func:`fig3_series`), recorded with their legend labels."""
     rows = plain_rows([r.row for r in results], COLUMNS)
@@ -574,6 +711,7 @@ def write_tables(results, args, groups, fig2, fig3):
                     "fig3": [{"file": s.result.row["file"], "step": s.result.row["step"],
                               "reference": s.is_reference, "label": s.label} for s in fig3]},
         "rows": rows,
+        "sweeps": {path: fits.to_dict() for path, fits in (sweeps or {}).items()},
         "distributions": [{"file": r.row["file"], "step": r.row["step"],
                            "edges": r.distribution.edges.tolist(),
                            "counts": r.distribution.counts.tolist(),
@@ -629,6 +767,9 @@ def build_parser(rank=0):
                    help="gaps <= G (length units) count as zero gap: contact where p > 0, "
                         "'zero gap' (not in the histogram) elsewhere (default: 1e-6 x the "
                         "mean gap, above the solver's round-off; 0 demands exact zeros)")
+    p.add_argument("--map-pixels", type=positive_int, default=overview.FIGURE_MAP_PIXELS,
+                   metavar="N", help="largest number of pixels per axis of the maps; bigger "
+                   "fields are block-averaged (default %(default)s)")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     p.add_argument("-q", "--quiet", action="store_true", help="print only warnings and errors")
     return p
@@ -746,10 +887,26 @@ def fig3_groups(results, reference, log=None):
     return groups
 
 
+def output_stems(paths):
+    """File-name stems of the per-input outputs: the input's stem, made unique in order."""
+    stems, used = {}, set()
+    for path in paths:
+        key = str(path)
+        if key in stems:
+            continue
+        stem, n = Path(path).stem, 1
+        while (stem if n == 1 else f"{stem}-{n}") in used:
+            n += 1
+        stems[key] = stem if n == 1 else f"{stem}-{n}"
+        used.add(stems[key])
+    return stems
+
+
 def _run(args, inputs, comm, log):
     root_decides(comm, lambda: check_outputs(args))
-    results = analyse_inputs(inputs, args, comm, log)
-    if not results:
+    surfaces, provenance = {}, {}
+    results = analyse_inputs(inputs, args, comm, log, surfaces, provenance)
+    if not results and not any(surfaces.values()):
         raise PostError("no complete step to analyse in " + ", ".join(i.text for i in inputs))
     reference = None
     if args.reference is not None:
@@ -763,20 +920,87 @@ def _run(args, inputs, comm, log):
             raise PostError(f"--reference {args.reference.text}: contact fraction "
                             f"{reference.row['c']:g} gives no g0 to normalise by")
     groups = fig3_groups(results, reference, log)
-    if not groups:
+    if not groups and results:
         log.info("no Fig. 3: no --reference, and no adhesive step names a reference step")
     fig2, fig3 = fig2_series(results), fig3_series(groups)
+    stems = output_stems([i.path for i in inputs])
+    sweeps = {}
+    for path in stems:
+        steps = [r.row for r in results if r.row["file"] == path]
+        if steps:
+            view = surfaces.get(path)
+            sweeps[path] = overview.sweep_fits(
+                steps, None if view is None else view.statistics.rms_height)
 
     def write():
-        write_tables(results, args, groups, fig2, fig3)
-        paths = [args.output_dir / f"{TABLE_STEM}.csv", args.output_dir / f"{TABLE_STEM}.json"]
-        paths.append(args.output_dir / f"{FIG2_STEM}.{args.format}")
-        figure2(fig2, results, paths[-1])
-        if groups:
-            paths.append(args.output_dir / f"{FIG3_STEM}.{args.format}")
-            figure3(fig3, paths[-1])
-        paths.append(args.output_dir / f"{FIG4_STEM}.{args.format}")
-        figure4(paths[-1])
+        d, fmt = args.output_dir, args.format
+        figures = []
+
+        def add(name, title, kind, file=None, step=None):
+            figures.append({"file": name, "title": title, "kind": kind, "input": file,
+                            "step": step})
+        paths = []
+        if results:
+            write_tables(results, args, groups, fig2, fig3, sweeps)
+            paths += [d / f"{TABLE_STEM}.csv", d / f"{TABLE_STEM}.json"]
+            figure2(fig2, results, d / f"{FIG2_STEM}.{fmt}")
+            add(f"{FIG2_STEM}.{fmt}", "Gap distributions collapsed onto Eq. 13 (Fig. 2)", "fig2")
+            if groups:
+                figure3(fig3, d / f"{FIG3_STEM}.{fmt}")
+                add(f"{FIG3_STEM}.{fmt}", "Adhesive gap distributions (Fig. 3)", "fig3")
+        figure4(d / f"{FIG4_STEM}.{fmt}")
+        add(f"{FIG4_STEM}.{fmt}", "Integrand of Eq. 16 (Fig. 4)", "fig4")
+        for path, stem in stems.items():
+            view = surfaces.get(path)
+            if view is not None:
+                name = f"{stem}-psd.{fmt}"
+                overview.draw_psd(view, d / name, f"{path}: topography")
+                add(name, f"{path}: power spectrum of the topography", "psd", path)
+            steps = [r for r in results if r.row["file"] == path]
+            if view is not None and not steps:
+                name = f"{stem}-topography.{fmt}"
+                overview.draw_maps(overview.StepMaps({"topography": view.topography}, math.nan,
+                                                     f"{path}: topography"), d / name)
+                add(name, f"{path}: topography", "maps", path)
+            for r in steps:
+                base = f"{stem}-step{r.row['step']:04d}-maps"
+                overview.draw_maps(r.maps, d / f"{base}.{fmt}")
+                r.maps.save(d / f"{base}.npz")
+                add(f"{base}.{fmt}", r.maps.title, "maps", path, r.row["step"])
+            if len(steps) >= 2:
+                name = f"{stem}-sweep.{fmt}"
+                overview.draw_sweep([r.row for r in steps], sweeps[path], d / name,
+                                    f"{path}: sweep of {len(steps)} steps")
+                add(name, f"{path}: contact area, mean gap and adhesion against load",
+                    "sweep", path)
+            if steps:
+                name = f"{stem}-patches.{fmt}"
+                overview.draw_patches([(f"step {r.row['step']}", r.patches) for r in steps],
+                                      d / name, f"{path}: contact patch areas")
+                add(name, f"{path}: contact patch-area distributions", "patches", path)
+        if results:
+            patch_rows = [dict(file=r.row["file"], step=r.row["step"], **row)
+                          for r in results for row in r.patches.rows()]
+            write_csv(d / PATCH_TABLE, plain_rows(patch_rows, PATCH_COLUMNS), PATCH_COLUMNS)
+            paths.append(d / PATCH_TABLE)
+        surface_rows = plain_rows([v.row for v in surfaces.values() if v is not None],
+                                  SURFACE_COLUMNS)
+        if surface_rows:
+            write_csv(d / f"{SURFACE_STEM}.csv", surface_rows, SURFACE_COLUMNS)
+            write_json(d / f"{SURFACE_STEM}.json", {"petgap_version": __version__,
+                                                    "conventions": SURFACE_CONVENTIONS,
+                                                    "rows": surface_rows,
+                                                    "psd": {v.row["file"]: v.row["psd"]
+                                                            for v in surfaces.values()
+                                                            if v is not None}})
+            paths += [d / f"{SURFACE_STEM}.csv", d / f"{SURFACE_STEM}.json"]
+        write_json(d / MANIFEST, {"petgap_version": __version__, "figures": figures})
+        paths += [d / f["file"] for f in figures] + [d / MANIFEST]
+        report.write_report(d, inputs=[i.path for i in inputs], figures=figures,
+                            rows=[r.row for r in results], surfaces=surface_rows,
+                            sweeps={k: v.to_dict() for k, v in sweeps.items()},
+                            command_line=" ".join(sys.argv), provenance=provenance)
+        paths.append(d / report.REPORT)
         return [str(p) for p in paths]
 
     written = root_decides(comm, write)

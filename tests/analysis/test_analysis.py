@@ -573,8 +573,13 @@ def test_post_cli_tables_and_figures(comm, mpi_tmp_path, run_cli):
 
     assert proc.returncode == 0, proc.stderr
     names = {f.name for f in out.iterdir()}
+    per_run = {"run-psd.png", "run-step0000-maps.png", "run-step0000-maps.npz",
+               "run-step0001-maps.png", "run-step0001-maps.npz", "run-sweep.png",
+               "run-patches.png"}
+    overview = {"figures.json", "report.html", "patches.csv", "surface-statistics.csv",
+                "surface-statistics.json"}
     assert names == {"gap-analysis.csv", "gap-analysis.json", "fig2-gap-distribution.png",
-                     "fig3-adhesion.png", "fig4-integrand.png"}
+                     "fig3-adhesion.png", "fig4-integrand.png"} | per_run | overview
     for png in ("fig2-gap-distribution.png", "fig3-adhesion.png", "fig4-integrand.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     doc = json.loads((out / "gap-analysis.json").read_text())
@@ -608,7 +613,8 @@ def test_post_cli_tables_and_figures(comm, mpi_tmp_path, run_cli):
     assert explicit.returncode == 0, explicit.stderr
     assert {f.name for f in other.iterdir()} == {
         "gap-analysis.csv", "gap-analysis.json", "fig2-gap-distribution.svg",
-        "fig3-adhesion.svg", "fig4-integrand.svg"}
+        "fig3-adhesion.svg", "fig4-integrand.svg", "run-psd.svg", "run-step0001-maps.svg",
+        "run-step0001-maps.npz", "run-patches.svg"} | overview
     ref_doc = json.loads((other / "gap-analysis.json").read_text())
     assert [r["step"] for r in ref_doc["rows"]] == [1]
     assert ref_doc["fig3_references"][0]["step"] == 0
