@@ -7,6 +7,7 @@ continues it (:func:`run_scene`).  The command line is in :mod:`petgap.app.main`
 """
 import hashlib
 import json
+import os
 import shlex
 import signal
 import time
@@ -19,7 +20,8 @@ from mpi4py import MPI
 from petgap.app.build import build
 from petgap.io.results import (ResultExistsError, ResultFile, check_free_space,
                                 existing_result, output_path_error)
-from petgap.io.scene import Scene
+from petgap.io.lock import ResultLock
+from petgap.io.scene import Scene, schema_default
 from petgap.mechanics.problem import Load, MeanGap
 from petgap.parallel.collective import root_decides
 from petgap.parallel.log import get_logger
@@ -91,7 +93,28 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
                  "compute it again)", output)
         return RunResult(output=output, grid=None, topography=None, statistics=None, steps=[],
                          complete_already=True)
-    resume = state == "resume"
+    with ResultLock(output, comm):
+        # decided again under the lock: another job may have written it meanwhile
+        state = _output_state(scene, raw_output, comm, overwrite)
+        if state == "complete":
+            log.info("%s is complete, made from this scene; nothing to do", output)
+            return RunResult(output=output, grid=None, topography=None, statistics=None,
+                             steps=[], complete_already=True)
+        return _run_locked(scene, comm, output, state == "resume", overwrite, petsc_args,
+                           log, strict)
+
+
+def partial_path(output):
+    """Where a new result file is made before it is complete enough to be one:
+    ``.<name>.partial`` beside it, renamed to ``output`` once the provenance and the
+    topography are written, so that a job killed while creating it never leaves an
+    unreadable file at ``output``."""
+    output = Path(output)
+    return output.with_name(f".{output.name}.partial")
+
+
+def _run_locked(scene, comm, output, resume, overwrite, petsc_args, log, strict):
+    """The run proper, under the result file's lock (see :func:`run_scene`)."""
     log.info("%d rank%s; result file %s%s", comm.size, "" if comm.size == 1 else "s", output,
              " (continuing an interrupted run)" if resume else "")
     model = build(scene, comm, petsc_args=petsc_args, log=log, strict=strict)
@@ -110,13 +133,20 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
             result.close(complete=False)
     else:
         check_free_space(output, 8 * grid.npoints * ("topography" in scene.output.fields), comm)
-        with ResultFile.create(output, comm, overwrite=overwrite, provenance=provenance) as result:
+        partial = partial_path(output)
+        if root_decides(comm, partial.exists):
+            log.warning("%s is the unfinished file of a petgap run killed while creating %s; "
+                        "starting again", partial, output)
+        with ResultFile.create(partial, comm, overwrite=True, provenance=provenance) as result:
             attrs = {"statistics": stats} if scene.output.statistics else None
+            result.write_coordinates(grid, scene.units.length)
             if "topography" in scene.output.fields:
-                result.write_field("topography", grid, topography, attrs=attrs)
+                result.write_field("topography", grid, topography, attrs=attrs,
+                                   units=_units(scene))
             elif attrs:
                 result.set_attrs(result.root, {"topography": attrs})
             result.close(complete=not model.steps)
+        root_decides(comm, lambda: os.replace(partial, output))
     steps = _run_steps(model, output, log, resume)
     if steps is not None:
         with ResultFile.open_for_append(output, comm) as result:
@@ -198,10 +228,17 @@ def scene_difference(attrs, scene):
     for section in list(new) + [s for s in old if s not in new]:
         a, b = old.get(section, {}), new.get(section, {})
         for key in list(b) + [k for k in a if k not in b]:
+            if key not in a and b.get(key) == schema_default(section, key):
+                continue        # a key newer than the file, at its default: nothing changed
             if a.get(key) != b.get(key):
                 return (f"{section}.{key} = {json.dumps(a.get(key))} in the file, "
                         f"{json.dumps(b.get(key))} in {where}")
     return ""
+
+
+def _units(scene):
+    """The scene's units of lengths and pressures, as result files label fields."""
+    return {"length": scene.units.length, "pressure": scene.units.pressure}
 
 
 def _run_steps(model, output, log, resume):
@@ -264,15 +301,17 @@ def _write_step(model, output, step, solution):
     check_free_space(output, 8 * grid.npoints * len(set(fields) - {"topography"}), comm)
     with _hold_sigterm(), ResultFile.open_for_append(output, comm) as result:
         group = result.begin_step(step.index, attrs=attrs)
+        units = _units(scene)
+        result.write_coordinates(grid, scene.units.length, group=group)
         if "gap" in fields:
-            result.write_field("gap", grid, solution.gap, group=group)
+            result.write_field("gap", grid, solution.gap, group=group, units=units)
         if "pressure" in fields:
-            result.write_field("pressure", grid, solution.pressure, group=group)
+            result.write_field("pressure", grid, solution.pressure, group=group, units=units)
         if "displacement" in fields:
             # u = g - d + h up to the rigid-body constant; stored with zero mean
             u = solution.gap + model.topography
             u -= grid.mean(u)
-            result.write_field("displacement", grid, u, group=group)
+            result.write_field("displacement", grid, u, group=group, units=units)
         result.end_step(group)
         result.close(complete=False)
     return dict(scalars, index=step.index, chain=step.chain)

@@ -288,10 +288,19 @@ def _set_attrs(obj, attrs):
             obj.attrs[k] = v
 
 
+#: Attributes that HDF5's dimension-scale API keeps for itself (object references,
+#: scale names): bookkeeping of the file format, not petgap's data.
+DIMENSION_SCALE_ATTRS = frozenset({"CLASS", "NAME", "DIMENSION_LIST", "REFERENCE_LIST",
+                                   "DIMENSION_LABELS"})
+
+
 def read_attrs(obj):
-    """Attributes of a group or dataset as a plain dict (bytes decoded, 0-d arrays unwrapped)."""
+    """Attributes of a group or dataset as a plain dict (bytes decoded, 0-d arrays unwrapped),
+    without the dimension-scale bookkeeping (:data:`DIMENSION_SCALE_ATTRS`)."""
     out = {}
     for k, v in obj.attrs.items():
+        if k in DIMENSION_SCALE_ATTRS:
+            continue
         if isinstance(v, bytes):
             v = v.decode()
         elif isinstance(v, np.ndarray) and v.dtype.kind == "O":
@@ -345,6 +354,24 @@ def write_field(group, name, grid, local_array):
         else np.zeros((1, grid.shape[1]))
     dset.id.write(mspace, fspace, buf, dxpl=_xfer(dset))
     return dset
+
+
+#: What each field is, for the ``long_name`` and ``units`` attributes of its dataset:
+#: (description, "length" or "pressure").
+FIELD_LABELS = {
+    "topography": ("height of the rough surface", "length"),
+    "gap": ("gap between the surfaces", "length"),
+    "pressure": ("contact pressure, positive in compression", "pressure"),
+    "displacement": ("normal surface displacement of the elastic half-space, zero mean",
+                     "length"),
+}
+#: Names of the coordinate datasets (dimension scales) along the grid's axes.
+COORDINATES = ("x", "y")
+
+
+def coordinate_values(grid):
+    """Pixel positions ``i dx`` and ``j dy`` along x and y (lengths)."""
+    return np.arange(grid.shape[0]) * grid.dx, np.arange(grid.shape[1]) * grid.dy
 
 
 def read_field(h5, name, grid, out=None):
@@ -483,11 +510,45 @@ class ResultFile:
         """Write attributes (nested mappings and dataclasses flattened) on a group or dataset."""
         _set_attrs(self.file[obj] if isinstance(obj, str) else obj, attrs)
 
-    def write_field(self, name, grid, local_array, group=None, attrs=None):
-        """:func:`write_field` into ``group`` (default: root), with optional attributes."""
+    def write_coordinates(self, grid, length_unit="1", group=None):
+        """Datasets ``x`` and ``y`` (pixel positions) in ``group`` (default: root) as HDF5
+        dimension scales.
+
+        Collective.  Fields written afterwards into the same group by
+        :meth:`write_field` have them attached to their two dimensions, so that
+        netCDF-aware readers (xarray with h5netcdf, ParaView, Panoply) show each field
+        as a map on labelled axes; each step group has its own pair (``nx + ny``
+        numbers), so that a step opens on its own.  Nothing is written if the group
+        has them already (a resumed run).
+        """
+        where = self.file if group is None else group
+        if all(n in where for n in COORDINATES):
+            return
+        for name, values, axis in zip(COORDINATES, coordinate_values(grid), ("X", "Y")):
+            dset = where.create_dataset(name, data=values)   # every rank the same data
+            _set_attrs(dset, {"units": length_unit, "long_name": f"{name} position of the pixel",
+                              "axis": axis})
+            dset.make_scale(name)
+
+    def write_field(self, name, grid, local_array, group=None, attrs=None, units=None):
+        """:func:`write_field` into ``group`` (default: root), with optional attributes.
+
+        ``units``: the unit of lengths and of pressures (``{"length": ..., "pressure":
+        ...}``); with it a field named in :data:`FIELD_LABELS` gets its ``units`` and
+        ``long_name``.  The coordinates of :meth:`write_coordinates`, if the file has
+        them, become the field's dimension scales.
+        """
         dset = write_field(self.file if group is None else group, name, grid, local_array)
-        if attrs:
-            _set_attrs(dset, attrs)
+        labels = {}
+        if units is not None and name in FIELD_LABELS:
+            description, kind = FIELD_LABELS[name]
+            labels = {"long_name": description, "units": units[kind]}
+        if attrs or labels:
+            _set_attrs(dset, dict(attrs or {}, **labels))
+        where = self.file if group is None else group
+        if all(n in where for n in COORDINATES):
+            for dim, n in enumerate(COORDINATES):
+                dset.dims[dim].attach_scale(where[n])
         return dset
 
     def read_field(self, name, grid, group=None, out=None):

@@ -40,7 +40,8 @@ from pathlib import Path
 from petgap.parallel.collective import root_decides
 
 __all__ = ["SceneError", "Scene", "GridSection", "SurfaceSection", "MaterialSection",
-           "InteractionSection", "ControlSection", "SolverSection", "OutputSection",
+           "InteractionSection", "ControlSection", "SolverSection", "OutputSection", "UnitsSection",
+           "schema_default",
            "describe_schema", "to_toml"]
 
 
@@ -616,6 +617,23 @@ class OutputSection:
     statistics: bool = key(Bool(), True, "write surface and contact statistics as attributes")
 
 
+@dataclass(frozen=True)
+class UnitsSection:
+    """Names of the units the scene's numbers are in, for labels and result files.
+
+    petgap converts nothing: every length of the scene (``grid.a0``, wavelengths,
+    heights, mean gaps, ``interaction.range``) is a number in ``length`` and every
+    pressure (loads, ``material.contact_modulus``) a number in ``pressure``; results
+    come out in the same units and result files say so in their ``units``
+    attributes.  ``"1"`` (the default, UDUNITS' dimensionless) reads as "in the
+    scene's own units": pixels when ``a0 = 1``, ``E*`` when ``contact_modulus = 1``.
+    """
+    length: str = key(Str(), "1", "unit of every length, as a UDUNITS string "
+                      "(e.g. \"um\", \"nm\", \"m\"; \"1\": the scene's own unit)")
+    pressure: str = key(Str(), "1", "unit of every pressure, as a UDUNITS string "
+                        "(e.g. \"MPa\", \"Pa\"; \"1\": the scene's own unit)")
+
+
 def _section(cls, doc=None):
     return field(default=None, metadata={"section": cls, "doc": doc or cls.__doc__})
 
@@ -644,6 +662,7 @@ class Scene:
     control: ControlSection = _section(ControlSection)
     solver: SolverSection = _section(SolverSection)
     output: OutputSection = _section(OutputSection)
+    units: UnitsSection = _section(UnitsSection)
     text: str = ""
     path: str = None
     base_dir: str = "."
@@ -748,6 +767,21 @@ def _toml_value(value):
                                for k, v in value.items()) + "}"
     raise SceneError(f"{value!r}: a {type(value).__name__} has no TOML form; allowed: numbers, "
                      f"strings, booleans, lists and tables")
+
+
+def schema_default(section, name):
+    """The plain default of key ``section.name`` (``None`` if it has none or is unknown).
+
+    Used to compare a stored scene with a newer schema: a key that a file does not
+    have, and whose value is its default, changes nothing that was computed.
+    """
+    for sec_name, cls, _ in _sections():
+        if sec_name == section:
+            k = _keys(cls).get(name)
+            if k is None or k.default is REQUIRED or isinstance(k.default, Derived):
+                return None
+            return list(k.default) if isinstance(k.default, tuple) else k.default
+    return None
 
 
 def _sections():

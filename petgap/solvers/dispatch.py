@@ -37,7 +37,7 @@ TAO's reason when it stops for any other cause.
 from petsc4py import PETSc
 
 from petgap.mechanics.problem import Load, MeanGap
-from petgap.solvers.pressure_cg import touching_state
+from petgap.solvers.pressure_cg import full_contact_state, touching_state
 from petgap.solvers.tao import (PETGAP_TYPES, petsc_options, solve_load_by_mean_gap,
                                 solve_mean_gap_by_multiplier, tao_solve)
 
@@ -86,6 +86,22 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
     adhesive = problem.interaction.adhesive
     if isinstance(control, Load) and not adhesive and control.mean_pressure == 0:
         return touching_state(problem, control)  # nothing to solve, for any solver
+    checked = 0
+    if isinstance(control, Load) and not adhesive:
+        before = problem.operator_applications
+        full = full_contact_state(problem, control)   # likewise, at the other end
+        if full is not None:
+            full.operator_applications = problem.operator_applications - before
+            return full
+        checked = problem.operator_applications - before   # the first step of a problem
+    solution = _solve(problem, control, tao_type, adhesive, tolerance, max_iterations, initial,
+                      options, monitor)
+    solution.operator_applications += checked
+    return solution
+
+
+def _solve(problem, control, tao_type, adhesive, tolerance, max_iterations, initial, options,
+           monitor):
     if tao_type == "pcg":
         tao_type = "pcg-pressure" if (isinstance(control, Load) and not adhesive) else "pcg-gap"
     if tao_type == "pcg-pressure" and adhesive:

@@ -232,8 +232,16 @@ def _read_hdf5_slab(grid, path, name):
     return local
 
 
+#: Largest height magnitude accepted.  Statistics and the solvers square heights and
+#: sum them over up to 2^62 points (rms height, energies), and multiply them by
+#: wavevectors: beyond about 1e150 such sums overflow double precision.  No unit of
+#: length makes a real surface that rough; such numbers are a wrong unit or a corrupt file.
+MAX_HEIGHT = 1e100
+
+
 def _check_finite(grid, local, what):
-    """Raise on every rank if any rank's slab holds NaN or inf (count and first global index)."""
+    """Raise on every rank if any rank's slab holds NaN or inf (count and first global index),
+    or heights beyond :data:`MAX_HEIGHT` in magnitude."""
     bad = ~np.isfinite(local)
     count = int(np.count_nonzero(bad))
     first = grid.x_slice.start * grid.ny + int(np.argmax(bad)) if count else grid.npoints
@@ -242,6 +250,11 @@ def _check_finite(grid, local, what):
         first = grid.comm.allreduce(first, op=MPI.MIN)
         raise ValueError(f"topography {what} holds {count} non-finite values (NaN or inf); "
                          f"the first at global index (i, j) = {divmod(first, grid.ny)}")
+    largest = grid.comm.allreduce(float(np.max(np.abs(local), initial=0.0)), op=MPI.MAX)
+    if largest > MAX_HEIGHT:
+        raise ValueError(f"topography {what} holds heights up to {largest:.3g} in magnitude; "
+                         f"at most {MAX_HEIGHT:g} is allowed (squared sums of such heights "
+                         f"overflow): is the file in the unit the scene assumes?")
 
 
 def _import_h5py():

@@ -338,6 +338,7 @@ def _bad_input_cases(d):
     nan[3, 5], inf[30, 7] = np.nan, -np.inf
     np.save(d / "nan.npy", nan)
     np.save(d / "inf.npy", inf)
+    np.save(d / "huge.npy", np.full((32, 32), 1e300))
     np.save(d / "narrow.npy", h[:, :31])
     np.save(d / "cube.npy", h[None])
     many = (SMALL.replace("nx = 32", "nx = 32.5")
@@ -359,6 +360,8 @@ def _bad_input_cases(d):
          ["nan.npy", "non-finite", "(3, 5)"]),
         ("topography-inf", FILE_SCENE.format(path="inf.npy", extra=""),
          ["inf.npy", "non-finite", "(30, 7)"]),
+        ("topography-huge", FILE_SCENE.format(path="huge.npy", extra=""),
+         ["huge.npy", "heights up to 1e+300", "at most 1e+100"]),
         ("topography-shape", FILE_SCENE.format(path="narrow.npy", extra=""),
          ["narrow.npy", "shape (32, 31)", "grid is (32, 32)"]),
         ("topography-3d", FILE_SCENE.format(path="cube.npy", extra=""),
@@ -665,3 +668,62 @@ def test_resume_refuses_a_changed_topography_file(comm, shared):
     assert f"topography file {d / 'heights.npy'} (surface.path) changed" in err
     assert "--overwrite" in err and "making the surface" not in proc["stdout"]
     assert wait_for_root(lambda: (d / "r.h5").read_bytes()) == before
+
+
+# ------------------------------------------------------------- one writer
+HOLD_LOCK = ("import fcntl, os, sys, time; fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT); "
+             "fcntl.flock(fd, fcntl.LOCK_EX); os.write(fd, b'host test, pid %d' % os.getpid()); "
+             "print('locked', flush=True); time.sleep(120)")
+
+
+def test_one_writer_per_result_file(comm, shared):
+    """While another job holds the result's lock, a run refuses at once (exit 2, on every
+    rank, naming the holder) and touches nothing; once the holder is gone -- killed, as a
+    crashed job would be -- the same command runs: a dead job leaves no stuck lock."""
+    d = shared / "locked"
+    wait_for_root(lambda: (d.mkdir(), (d / "small.toml").write_text(SMALL)))
+    out = d / "r.h5"
+    args = _mpirun(["petgap", "run", d / "small.toml", "-o", out])
+
+    def while_held():
+        holder = subprocess.Popen([sys.executable, "-c", HOLD_LOCK, str(d / ".r.h5.lock")],
+                                  stdout=subprocess.PIPE, text=True)
+        try:
+            assert holder.stdout.readline().strip() == "locked"
+            proc = subprocess.run(args, capture_output=True, text=True, env=clean_env(),
+                                  timeout=60)
+        finally:
+            holder.kill()           # as a crashed job: no unlock, no clean-up
+            holder.wait()
+        return {"returncode": proc.returncode, "stderr": proc.stderr}
+    refused = wait_for_root(while_held)
+    err = refused["stderr"]
+    assert refused["returncode"] == 2 and err.count("petgap: error:") == 1, err
+    assert f"another petgap job is writing {out}" in err and "host test, pid" in err
+    assert not wait_for_root(out.exists)
+    (ran,) = run_many([(args, out)])
+    assert ran["returncode"] == 0, ran["stderr"]
+    assert wait_for_root(lambda: not (d / ".r.h5.lock").exists())   # released and removed
+
+
+def test_file_of_a_job_killed_while_creating_it_is_started_again(comm, shared):
+    """A new result is made as ``.<name>.partial`` and renamed when its provenance and
+    topography are in: a job killed while creating it leaves no unreadable file at the
+    output, and the same command recognises the unfinished file, says so and starts again."""
+    d = shared / "creation"
+
+    def prepare():
+        d.mkdir()
+        (d / "small.toml").write_text(SMALL)
+        (d / ".r.h5.partial").write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 100)   # truncated
+        (d / ".r.h5.lock").write_text("host gone, pid 1")       # a dead job's sidecar
+    wait_for_root(prepare)
+    out = d / "r.h5"
+    (proc,) = run_many([(_mpirun(["petgap", "run", d / "small.toml", "-o", out]), out)])
+    assert proc["returncode"] == 0, proc["stderr"]
+    assert f"{d / '.r.h5.partial'} is the unfinished file of a petgap run killed while " \
+           f"creating {out}; starting again" in proc["stdout"] + proc["stderr"]
+    result = read_result(out)
+    assert "error" not in result and result["attrs"]["complete"] is True
+    assert sorted(result["steps"]) == [0, 1] and result["incomplete"] == []
+    assert not wait_for_root((d / ".r.h5.partial").exists)

@@ -35,6 +35,9 @@ kind = "{control}"
 tolerance = 1e-8
 [output]
 fields = ["topography", "gap", "pressure"]
+[units]
+length = "um"
+pressure = "MPa"
 """
 
 
@@ -96,6 +99,20 @@ def test_sweep_outputs_show_the_run(comm, mpi_tmp_path, run_cli):
     assert fits["kappa_rep_fit"] == pytest.approx(kappa.kappa, rel=1e-12)
     assert 1.0 < fits["kappa_rep_fit"] < 4.0          # kappa_rep is about 2
     assert 0.1 < fits["gamma"] < 2.0 and fits["gap_law_points"] == 3
+    # the result file opens in xarray as labelled maps in the scene's units
+    xarray = pytest.importorskip("xarray")
+    for step in range(3):
+        with xarray.open_dataset(run, engine="h5netcdf", group=f"step_{step:04d}") as ds:
+            assert ds["gap"].dims == ("x", "y") and ds["pressure"].dims == ("x", "y")
+            np.testing.assert_array_equal(ds["x"].values, np.arange(96) * 1.0)
+            np.testing.assert_array_equal(ds["y"].values, np.arange(80) * 1.0)
+            assert ds["x"].attrs["units"] == "um" and ds["gap"].attrs["units"] == "um"
+            assert ds["pressure"].attrs["units"] == "MPa"
+            assert ds["gap"].attrs["long_name"] == "gap between the surfaces"
+            assert float(ds["pressure"].mean()) == pytest.approx(rows[step]["mean_pressure"],
+                                                                 rel=1e-12)
+    with xarray.open_dataset(run, engine="h5netcdf") as ds:
+        assert ds["topography"].dims == ("x", "y") and ds["topography"].attrs["units"] == "um"
     # the report: every step's numbers and status, and a page that renders
     page = (out / "report.html").read_text()
     assert "Every step converged" in page

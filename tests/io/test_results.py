@@ -187,3 +187,37 @@ def test_flatten_attrs():
 def test_h5py_is_the_mpi_build():
     assert h5py.get_config().mpi
     assert os.environ.get("H5PY_ALWAYS_USE_MPI")
+
+
+def test_fields_carry_coordinates_units_and_names(comm, mpi_tmp_path):
+    """Dimension scales x, y (pixel positions), units and long_name, root and step alike."""
+    grid = Grid((12, 10), size=(6.0, 25.0), comm=comm, planner="estimate", wisdom=False)
+    path = mpi_tmp_path / "labelled.h5"
+    units = {"length": "nm", "pressure": "GPa"}
+    field = np.arange(120, dtype=float).reshape(12, 10)
+    with ResultFile.create(path, comm) as out:
+        out.write_coordinates(grid, "nm")
+        out.write_field("topography", grid, grid.local_part(field), units=units)
+        group = out.begin_step(0)
+        out.write_coordinates(grid, "nm", group=group)
+        out.write_field("pressure", grid, grid.local_part(field), group=group, units=units)
+        out.write_field("extra", grid, grid.local_part(field), group=group)
+        out.end_step(group)
+    if comm.rank != 0:
+        return
+    with h5py.File(path, "r", driver=None) as f:
+        for where, name, unit in (("/", "topography", "nm"), ("/step_0000", "pressure", "GPa")):
+            dset = f[where][name]
+            assert dset.attrs["units"] == unit
+            x, y = dset.dims[0][0], dset.dims[1][0]
+            assert x.name == f"{where.rstrip('/')}/x" and y.name == f"{where.rstrip('/')}/y"
+            np.testing.assert_array_equal(x[()], np.arange(12) * 0.5)
+            np.testing.assert_array_equal(y[()], np.arange(10) * 2.5)
+            assert x.attrs["units"] == "nm" and x.attrs["axis"] == "X"
+        assert f["step_0000/pressure"].attrs["long_name"].startswith("contact pressure")
+        assert "units" not in f["step_0000/extra"].attrs        # not a known field
+    xarray = pytest.importorskip("xarray")
+    with xarray.open_dataset(path, engine="h5netcdf", group="step_0000") as ds:
+        assert ds["pressure"].dims == ("x", "y")
+        np.testing.assert_array_equal(ds["pressure"].values, field)
+        np.testing.assert_array_equal(ds["y"].values, np.arange(10) * 2.5)

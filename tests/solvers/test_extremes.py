@@ -456,3 +456,36 @@ def test_three_ranks_on_two_cores_uneven_slabs(comm, mpi_tmp_path, run_cli):
                                    atol=1e-12 * problem.gap_scale)
         np.testing.assert_allclose(fields["pressure"], sol.pressure, rtol=0,
                                    atol=1e-12 * problem.pressure_scale)
+
+
+def test_full_contact_load_is_westergaards(comm):
+    """P_full of a sinusoid h0 cos(2 pi x / L) is Westergaard's p* = pi E* h0 / L."""
+    from petgap.solvers.pressure_cg import full_contact_load  # deferred: one test needs it
+    grid = make_grid((64, 16), comm, size=(3.0, 0.75))
+    x, _ = grid.local_positions()
+    h = 0.02 * np.cos(2 * np.pi * x / 3.0)
+    problem = ContactProblem(grid, h, contact_modulus=E_STAR)
+    assert full_contact_load(problem) == pytest.approx(np.pi * E_STAR * 0.02 / 3.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("factor", [1.0, 1e3, 1e300])
+def test_loads_beyond_full_contact_need_no_iteration(comm, factor):
+    """At or beyond P_full = -min(K h) the solution is known: gap 0, p = P0 + K h.  It is
+    returned at once (reason full_contact), also for a load of 1e300 E*, where an
+    iterative solver would run to its limit as its contact set grows to every point."""
+    grid = make_grid((32, 32), comm)
+    problem = rough(grid, seed=4)
+    kh = problem.elastic_pressure(np.zeros(grid.local_shape)).copy()
+    p_full = -gmin(grid, kh)
+    load = min(factor * p_full, 1e300 * E_STAR)
+    before = problem.operator_applications
+    sol = solve(problem, Load(load), tolerance=TOL, max_iterations=5)
+    assert sol.converged and sol.reason == "full_contact" and sol.iterations == 0
+    assert sol.operator_applications == problem.operator_applications - before
+    assert gmax(grid, np.abs(sol.gap)) == 0.0
+    # at P_full exactly the deepest point touches with p = 0: not in repulsive contact
+    assert sol.contact_fraction == (1.0 if factor > 1 else 1.0 - 1.0 / grid.npoints)
+    assert gmax(grid, np.abs(sol.pressure - (load + kh))) <= 1e-12 * max(load, p_full)
+    assert sol.mean_pressure == pytest.approx(load, rel=1e-12)
+    below = solve(problem, Load(0.999 * p_full), tolerance=TOL, max_iterations=2000)
+    assert below.converged and below.reason != "full_contact" and below.contact_fraction < 1

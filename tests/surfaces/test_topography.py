@@ -128,6 +128,8 @@ def _bad_files(tmp):
                          ["3 non-finite values", "(i, j) = (40, 7)"]),
         "early.npy": (lambda p: np.save(p, early), ValueError,
                       ["2 non-finite values", "(i, j) = (2, 3)"]),
+        "huge.npy": (lambda p: np.save(p, np.full(SHAPE, 3e300)), ValueError,
+                     ["heights up to 3e+300", "at most 1e+100", "unit"]),
         "garbage.npy": (lambda p: p.write_bytes(b"not a numpy file"), ValueError,
                         ["cannot read", "as a .npy file"]),
         "garbage.h5": (lambda p: p.write_bytes(b"not an HDF5 file"), ValueError,
