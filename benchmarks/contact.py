@@ -213,7 +213,7 @@ def main():
 
     print(f"| N | ranks | solver | iterations | FFT pairs / it | s / it | FFT floor s | "
           f"evaluation / floor | operator / floor | rest | solve / floor | start s | total s | c | kkt | "
-          f"bytes / point | Tamaas its | Tamaas s | Tamaas kkt | time ratio |")
+          "bytes / point | Tamaas its | Tamaas s | Tamaas kkt | time ratio |")
     print("|" + "---|" * 20)
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.sizes:

@@ -11,7 +11,7 @@ import re
 import tomllib
 from pathlib import Path
 
-import petgap.io.results  # noqa: F401  (selects the MPI build before anything else loads h5py)
+import petgap.io.results  # noqa: F401 (selects the MPI build before anything else loads h5py)
 
 import h5py  # noqa: E402
 

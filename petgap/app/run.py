@@ -24,6 +24,7 @@ from petgap.io.lock import ResultLock
 from petgap.io.scene import Scene, schema_default
 from petgap.mechanics.problem import Load, MeanGap
 from petgap.parallel.collective import root_decides
+from petgap.solvers.convergence import ResidualTrend
 from petgap.parallel.log import get_logger
 
 
@@ -267,8 +268,10 @@ def _run_steps(model, output, log, resume):
 
     def before(index, control):
         step = model.steps[index]
-        log.info("step %d (%s): %s = %.6g", step.index, step.chain, control.kind, control.value)
-        return {"monitor": _progress(log, step.index)}
+        log.info("step %d (%s, %d of %d): %s = %.6g", step.index, step.chain, step.index + 1,
+                 len(model.steps), control.kind, control.value)
+        return {"monitor": _progress(log, step.index, len(model.steps),
+                                     scene.solver.tolerance)}
 
     summaries = []
     for step, state in zip(model.steps, model.sweep(done, before=before)):
@@ -373,18 +376,34 @@ class _hold_sigterm:
         return False
 
 
-def _progress(log, index, every=5.0):
-    """A solver monitor that logs (rank 0) at most every ``every`` seconds."""
+def _progress(log, index, nsteps, tolerance, every=5.0):
+    """A solver monitor that logs (rank 0) at most every ``every`` seconds: the step of
+    the sweep, the iteration, the KKT residual against its target, the time so far and,
+    from the residual's decay (:class:`petgap.solvers.convergence.ResidualTrend`), an
+    estimate of the time left."""
     last = [time.perf_counter()]
     start = last[0]
+    trend = ResidualTrend(tolerance)
 
     def monitor(iteration, residual):
         now = time.perf_counter()
+        trend.add(now - start, residual)
         if now - last[0] >= every:
             last[0] = now
-            log.info("  step %d: iteration %d, KKT residual %.3e, %.1f s", index, iteration,
-                     residual, now - start)
+            left = trend.remaining()
+            log.info("  step %d of %d: iteration %d, KKT residual %.3e (target %.0e), %.1f s%s",
+                     index + 1, nsteps, iteration, residual, tolerance, now - start,
+                     "" if left is None else f", about {_duration(left)} to go")
     return monitor
+
+
+def _duration(seconds):
+    """``42 s``, ``3.5 min`` or ``1.2 h``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 def _log_solution(log, step, solution):

@@ -45,3 +45,41 @@ class Timer:
 
     def __call__(self):
         return time.perf_counter() - self.start
+
+
+class ResidualTrend:
+    """When will the residual reach the tolerance?  An estimate from its decay so far.
+
+    Conjugate-gradient residuals fall roughly geometrically once the contact set
+    has settled, so ``log(residual)`` is fitted by least squares as a straight line
+    in wall time over the most recent ``window`` observations and extrapolated to
+    the tolerance.  The estimate is for people watching a long run (a progress line
+    with "about N s to go"), not for decisions: it is ``None`` until there are
+    ``min_points`` observations or while the fitted residual does not fall.
+    """
+
+    def __init__(self, tolerance, window=30, min_points=4):
+        self.tolerance = float(tolerance)
+        self.window, self.min_points = int(window), int(min_points)
+        self.times, self.logs = [], []
+
+    def add(self, seconds, residual):
+        """Record the residual at ``seconds`` since the start (non-positive residuals
+        mean converged and end the estimate)."""
+        if residual > 0 and np.isfinite(residual):
+            self.times.append(float(seconds))
+            self.logs.append(float(np.log(residual)))
+            del self.times[:-self.window], self.logs[:-self.window]
+
+    def remaining(self):
+        """Seconds until the fitted residual reaches the tolerance, or None."""
+        if len(self.times) < self.min_points:
+            return None
+        t, y = np.array(self.times), np.array(self.logs)
+        if np.ptp(t) <= 0:
+            return None
+        slope, intercept = np.polyfit(t, y, 1)
+        if not slope < 0:
+            return None
+        finish = (np.log(self.tolerance) - intercept) / slope
+        return max(0.0, float(finish - t[-1]))

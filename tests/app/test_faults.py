@@ -533,8 +533,8 @@ def test_unwritable_output_directory(comm, shared):
 # ------------------------------------------------------- interrupted sweeps
 INTERRUPTIONS = {
     # action: (trigger line in the progress log, steps certainly complete by then)
-    "term-mpirun": ("step 5 (adhesive)", 5),
-    "term-ranks": ("step 2 (reference)", 2),
+    "term-mpirun": ("step 5 (adhesive,", 5),
+    "term-ranks": ("step 2 (reference,", 2),
     "kill-rank1": ("step 4 converged", 4),
 }
 
