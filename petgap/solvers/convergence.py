@@ -8,7 +8,8 @@ import time
 import numpy as np
 
 
-def judge(residual, tolerance, fresh, iteration, max_iterations, history, monitor):
+def judge(residual, tolerance, fresh, iteration, max_iterations, history, monitor,
+          objective=None):
     """The verdict of an iterative solver on the residual at the start of an iteration.
 
     The conjugate-gradient solvers update their fields by recurrences between
@@ -21,7 +22,11 @@ def judge(residual, tolerance, fresh, iteration, max_iterations, history, monito
         ``"diverged_nan"``; ``"refresh"`` (converged on a recurrence: evaluate
         afresh and judge again; nothing is recorded); ``"converged_kkt"`` or
         ``"max_iterations"`` (stop); or ``""`` (carry on).  Except for the first
-        two, the residual is appended to ``history`` and passed to ``monitor``.
+        two, the residual is appended to ``history`` and passed to ``monitor``:
+        ``monitor(iteration, residual)``, or ``monitor(iteration, residual, F)`` with
+        ``F = objective()`` if the monitor has a true ``wants_objective`` attribute
+        (TAO's ``-tao_monitor``) and the solver can say what it minimises; ``objective``
+        is collective, and costs a pass over the fields, so it is only called then.
     """
     if not np.isfinite(residual):
         return "diverged_nan"
@@ -29,7 +34,10 @@ def judge(residual, tolerance, fresh, iteration, max_iterations, history, monito
         return "refresh"
     history.append(residual)
     if monitor is not None:
-        monitor(iteration, residual)
+        if objective is not None and getattr(monitor, "wants_objective", False):
+            monitor(iteration, residual, objective())
+        else:
+            monitor(iteration, residual)
     if residual <= tolerance:
         return "converged_kkt"
     if iteration >= max_iterations:

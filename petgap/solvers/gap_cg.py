@@ -228,7 +228,17 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
             residual = max(ext[0] + lam, ext[1] - lam) / problem.pressure_scale
         else:
             residual = 0.0
-        verdict = judge(residual, tolerance, fresh, it, max_iterations, history, monitor)
+        def objective():
+            # elastic + interaction energy + P0 A mean(g) (the load's work; constant
+            # under mean-gap control): (1/2) sum pel (g + h) + sum v(g) + P0 sum g, x dx dy
+            local = 0.5 * float(np.sum(pel * (g + h)))
+            if adh:
+                local += float(np.sum(interaction.energy(g)))
+            if load:
+                local += lam * float(np.sum(g))
+            return grid.pixel_area * global_sums(comm, local)[0]
+        verdict = judge(residual, tolerance, fresh, it, max_iterations, history, monitor,
+                        objective)
         if verdict == "refresh":
             np.add(g, h, out=padded[:, :grid.ny])
             fresh_pressure()

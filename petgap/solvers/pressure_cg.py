@@ -215,7 +215,15 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         norms = np.array([in_max, pen_max])
         comm.Allreduce(MPI.IN_PLACE, norms, op=MPI.MAX)
         residual = float(norms.max()) / problem.gap_scale
-        verdict = judge(residual, tolerance, fresh, it, max_iterations, history, monitor)
+
+        def objective():
+            # the complementary energy (1/2) <p, K^-1 p> - <p, h - offset> of the iterate,
+            # from the gap on S, g = K^-1 p - h + offset - shift: (1/2) sum p (g - h + offset
+            # + shift) dx dy
+            local = float(np.dot(pS, gS - h.ravel()[idx] + offset + shift))
+            return 0.5 * grid.pixel_area * global_sums(comm, local)[0]
+        verdict = judge(residual, tolerance, fresh, it, max_iterations, history, monitor,
+                        objective)
         if verdict == "refresh":
             fresh, scale = True, 1.0
             continue
@@ -338,7 +346,11 @@ def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, 
     if residual <= tolerance or max_iterations < 1:
         return None
     if monitor is not None:
-        monitor(0, residual)
+        if getattr(monitor, "wants_objective", False):
+            # p = P0 everywhere has u = K^-1 p = 0: F = -<p, h> = -P0 sum(h) dx dy
+            monitor(0, residual, -target * grid.pixel_area * global_sums(comm, h.sum())[0])
+        else:
+            monitor(0, residual)
     problem.half_space.apply_in_buffer(inverse=False)   # z = K g
     sum_z, gz = global_sums(comm, *_cs.uniform_sums(padded, h, hbar))
     zshift = sum_z / grid.npoints

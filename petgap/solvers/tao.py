@@ -35,6 +35,10 @@ PETGAP_TYPES = ("pcg", "pcg-pressure", "pcg-gap")
 _REASONS = {v: k for k, v in vars(PETSc.TAO.Reason).items() if not k.startswith("_")}
 
 
+#: Options that set TAO monitors printing the objective.
+TAO_MONITORS = ("tao_monitor", "tao_smonitor", "tao_cmonitor", "tao_gmonitor")
+
+
 class _PetgapTao:
     """TAO ``python`` context running one of petgap's own conjugate-gradient solvers."""
 
@@ -44,10 +48,20 @@ class _PetgapTao:
         self.solution = None
 
     def solve(self, tao):
-        def report(it, residual):
-            tao.monitor(its=it, f=0.0, res=residual)
+        caller_wants = getattr(self.monitor, "wants_objective", False)
+
+        def report(it, residual, objective=None):
+            tao.setIterationNumber(it)     # what TAO's default monitor prints
+            tao.monitor(its=it, f=0.0 if objective is None else objective, res=residual)
             if self.monitor is not None:
-                self.monitor(it, residual)
+                if caller_wants and objective is not None:
+                    self.monitor(it, residual, objective)
+                else:
+                    self.monitor(it, residual)
+        # TAO's monitors print the objective: have the solvers compute it (one extra pass
+        # over the contact set or the fields per iteration) only when one is asked for
+        report.wants_objective = caller_wants or any(PETSc.Options().hasName(name)
+                                                     for name in TAO_MONITORS)
         maxit = tao.getMaximumIterations()
         if self.kind == "pcg-pressure":
             self.solution = polonsky_keer(

@@ -489,3 +489,38 @@ def test_loads_beyond_full_contact_need_no_iteration(comm, factor):
     assert sol.mean_pressure == pytest.approx(load, rel=1e-12)
     below = solve(problem, Load(0.999 * p_full), tolerance=TOL, max_iterations=2000)
     assert below.converged and below.reason != "full_contact" and below.contact_fraction < 1
+
+
+@pytest.mark.parametrize("solver", ["pcg-pressure", "pcg-gap"])
+def test_monitor_objective_is_what_the_solver_minimises(comm, solver):
+    """A monitor that asks for the objective (as -tao_monitor does) gets, every iteration,
+    the functional the solver minimises: for the pressure solver the complementary energy
+    (1/2) <p, K^-1 p> - <p, h> (load control), for the gap solver the elastic energy plus
+    the load's work P0 sum(g) dx dy.  Its final value equals the same functional
+    computed independently from the solution's fields, and it falls overall."""
+    grid = make_grid((48, 48), comm)
+    problem = rough(grid, seed=5)
+    load = 0.01 * E_STAR
+    seen = []
+
+    def monitor(it, residual, objective=None):
+        seen.append((it, residual, objective))
+    monitor.wants_objective = True
+    sol = solve(problem, Load(load), solver=solver, tolerance=TOL, monitor=monitor)
+    assert sol.converged and len(seen) >= 3
+    assert all(f is not None and math.isfinite(f) for _, _, f in seen)
+    values = [f for _, _, f in seen]
+    assert values[-1] < values[0]
+    area = grid.pixel_area
+    if solver == "pcg-pressure":
+        u = problem.displacement(sol.pressure).copy()
+        expected = area * (0.5 * grid.sum(sol.pressure * u) - grid.sum(sol.pressure * problem.topography))
+    else:
+        pel = problem.elastic_pressure(sol.gap).copy()
+        expected = area * (0.5 * grid.sum(pel * (sol.gap + problem.topography))
+                           + load * grid.sum(sol.gap))
+    assert values[-1] == pytest.approx(expected, rel=1e-6)
+    plain = []
+    solve(problem, Load(load), solver=solver, tolerance=TOL,
+          monitor=lambda it, residual: plain.append(it))   # no objective asked: 2 arguments
+    assert plain
