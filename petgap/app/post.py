@@ -268,19 +268,9 @@ class Attributes:
 
 def step_attributes(result, index):
     """:class:`Attributes` of step ``index`` of an open :class:`petgap.io.results.ResultFile`."""
-    f = result.file
     name = step_name(index)
-    sources = [(f"{name} attributes", read_attrs(f[name])), ("root attributes", read_attrs(f))]
-    if "topography" in f:
-        sources.append(("topography dataset attributes", read_attrs(f["topography"])))
-    scene = sources[1][1].get("scene_resolved")
-    if scene:
-        try:
-            sources.append(("scene_resolved", _flatten(json.loads(scene))))
-        except (TypeError, ValueError):
-            raise PostError(f"{result.path}: root attribute 'scene_resolved' is not valid JSON") \
-                from None
-    return Attributes(f"{result.path}, {name}", sources)
+    step = (f"{name} attributes", read_attrs(result.file[name]))
+    return Attributes(f"{result.path}, {name}", [step] + file_attributes(result).sources)
 
 
 # ----------------------------------------------------------------- analysis

@@ -54,14 +54,21 @@ def assert_picture(path, min_colours=20):
     assert len(colours) >= min_colours, f"{path}: only {len(colours)} colours"
 
 
-def test_sweep_outputs_show_the_run(comm, mpi_tmp_path, run_cli):
-    scene = write_shared(comm, mpi_tmp_path / "sweep.toml",
-                         SWEEP.format(control="load", values="values = [0.001, 0.002, 0.004]"))
-    run, out = mpi_tmp_path / "sweep.h5", mpi_tmp_path / "post"
+def run_and_post(comm, directory, run_cli, name, control, values, *post_args):
+    """``petgap run`` of the test scene, then ``petgap-post``; the result and output paths."""
+    scene = write_shared(comm, directory / f"{name}.toml",
+                         SWEEP.format(control=control, values=values))
+    run, out = directory / f"{name}.h5", directory / "post"
     proc = run_cli(["petgap", "run", scene, "--output", run, "-q"], ranks=2)
     assert proc.returncode == 0, proc.stderr
-    post = run_cli(["petgap-post", run, "-o", out, "-q", "--map-pixels", "40"], ranks=2)
+    post = run_cli(["petgap-post", run, "-o", out, "-q", *post_args], ranks=2)
     assert post.returncode == 0, post.stderr
+    return run, out
+
+
+def test_sweep_outputs_show_the_run(comm, mpi_tmp_path, run_cli):
+    run, out = run_and_post(comm, mpi_tmp_path, run_cli, "sweep", "load",
+                            "values = [0.001, 0.002, 0.004]", "--map-pixels", "40")
     if comm.rank != 0:
         return
     manifest = json.loads((out / "figures.json").read_text())["figures"]
@@ -130,13 +137,7 @@ def test_sweep_outputs_show_the_run(comm, mpi_tmp_path, run_cli):
 
 
 def test_surface_only_run_gets_statistics_psd_and_map(comm, mpi_tmp_path, run_cli):
-    scene = write_shared(comm, mpi_tmp_path / "surface.toml",
-                         SWEEP.format(control="none", values=""))
-    run, out = mpi_tmp_path / "surface.h5", mpi_tmp_path / "post"
-    proc = run_cli(["petgap", "run", scene, "--output", run, "-q"], ranks=2)
-    assert proc.returncode == 0, proc.stderr
-    post = run_cli(["petgap-post", run, "-o", out, "-q"], ranks=2)
-    assert post.returncode == 0, post.stderr
+    run, out = run_and_post(comm, mpi_tmp_path, run_cli, "surface", "none", "")
     if comm.rank != 0:
         return
     doc = json.loads((out / "surface-statistics.json").read_text())
