@@ -16,7 +16,9 @@ set -euo pipefail
 packages=(python3-petsc4py python3-mpi4py python3-h5py-mpi libfftw3-mpi-dev libfftw3-dev
           openmpi-bin libopenmpi-dev python3-numpy python3-scipy python3-matplotlib
           python3-pytest cython3 python3-dev python3-venv build-essential
-          chromium python3-xarray python3-h5netcdf)
+          chromium python3-xarray python3-h5netcdf
+          python3-tifffile python3-xmltodict python3-defusedxml python3-openpyxl python3-yaml
+          python3-dateutil python3-pil python3-requests python3-pandas)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -40,6 +42,18 @@ if [ -z "$petsc_py" ]; then
   echo "petgap setup: no petsc4py found under /usr/lib/petscdir" >&2; exit 1
 fi
 [ "$(cat "$site/petgap-petsc4py.pth" 2>/dev/null)" = "$petsc_py" ] || echo "$petsc_py" > "$site/petgap-petsc4py.pth"
+
+# SurfaceTopography (ContactEngineering's readers of instrument files) and the few of its
+# dependencies Debian 12 does not have, from PyPI without their dependencies, so that pip
+# never replaces Debian's NumPy or MPI h5py; versions that work with NumPy 1.24
+# (SurfaceTopography >= 1.19 and NuMPI >= 0.8 need NumPy 2; its readers need pydantic 2).
+surface_topography=(SurfaceTopography==1.18.2 muFFT==0.95.0 NuMPI==0.7.0 DiscoverVersion==0.4.0
+                    tiffile==2018.10.18 igor2==0.5.15 numpyencoder==0.3.2 pydantic==2.9.2
+                    pydantic-core==2.23.4 typing_extensions==4.12.2 annotated-types==0.7.0)
+if ! "$PETGAP_VENV/bin/python" -c 'import SurfaceTopography' 2>/dev/null; then
+  echo "petgap setup: installing SurfaceTopography into the venv (no dependencies)" >&2
+  "$PETGAP_VENV/bin/python" -m pip install -q --no-deps "${surface_topography[@]}" >&2
+fi
 
 # (Re)build petgap when a source of the compiled part is newer than the build.
 stamp="$PETGAP_VENV/.petgap-build-stamp"

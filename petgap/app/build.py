@@ -16,6 +16,7 @@ A scene made in code works as one read from a file::
     states = list(model.sweep())
 """
 import contextlib
+import dataclasses
 import functools
 import math
 import resource
@@ -34,8 +35,34 @@ from petgap.solvers.dispatch import SOLVER_TYPES
 from petgap.solvers.sweeps import SweepStep, sweep
 from petgap.solvers.tao import check_petsc_options
 from petgap.surfaces.self_affine import self_affine
+from petgap.surfaces.statistics import finite_difference_slopes
 from petgap.surfaces.statistics import statistics as surface_statistics
 from petgap.surfaces.topography import load_topography
+
+
+#: How much the wrap-around pairs may raise the finite-difference rms slope of a map
+#: before its edges count as not matching (a periodic surface: well under 1 %).
+SEAM_TOLERANCE = 0.05
+
+
+def seam_warning(stats, path):
+    """The warning for a map solved as periodic whose opposite edges do not match, or "".
+
+    The finite-difference rms slope across the cell's edges exceeds the one inside the
+    map by more than :data:`SEAM_TOLERANCE`: the seam is a cliff the periodic images
+    put into the surface, which raises ``h0'`` (and with it the KKT scale, ``g0`` and
+    ``kappa``) and draws contact to the seam.
+    """
+    if stats.rms_slope_fd is None or not stats.rms_slope_fd > (1 + SEAM_TOLERANCE) * \
+            stats.rms_slope_fd_inner:
+        return ""
+    return (f"surface from {path}: its opposite edges do not match: rms slope "
+            f"{stats.rms_slope:.4g} spectrally and {stats.rms_slope_fd:.4g} by finite "
+            f"differences across the edges of the periodic cell, but "
+            f"{stats.rms_slope_fd_inner:.4g} inside the map; solved as periodic, the seam "
+            f"is a cliff in the surface (free-boundary contact is not available yet): "
+            f"remove the trend (surface.detrend = \"height\" or \"curvature\") or cut "
+            f"the map so that its edges match")
 
 
 def make_grid(scene, comm):
@@ -51,7 +78,9 @@ def make_surface(scene, grid):
         return self_affine(grid, s.hurst, s.lambda_min, s.lambda_max,
                            rms_slope=s.rms_slope, rms_height=s.rms_height, seed=s.seed)
     if s.kind == "file":
-        return load_topography(grid, s.path, s.dataset)
+        unit = None if scene.units.length == "1" else scene.units.length
+        return load_topography(grid, s.path, s.dataset, channel=s.channel, unit=unit,
+                               detrend=s.detrend, undefined=s.undefined)
     raise ValueError(f"surface.kind = {s.kind!r} is not implemented")  # the schema prevents it
 
 
@@ -250,7 +279,9 @@ class Model:
     @functools.cached_property
     def statistics(self):
         """Mean, rms height, slope and curvature of the surface (collective on first use)."""
-        return surface_statistics(self.grid, self.topography)
+        stats = surface_statistics(self.grid, self.topography)
+        periodic, inner = finite_difference_slopes(self.grid, self.topography)
+        return dataclasses.replace(stats, rms_slope_fd=periodic, rms_slope_fd_inner=inner)
 
     @property
     def solve_options(self):
@@ -321,6 +352,10 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
     args = list(scene.solver.petsc_args()) + list(petsc_args)
     model = Model(scene=scene, grid=grid, topography=topography, steps=steps,
                   petsc_args=args, options=petsc_options_dict(args))
+    if scene.surface.kind == "file":
+        seam = seam_warning(model.statistics, scene.surface.path)
+        if seam:
+            log.warning(seam)
     if not model.steps:
         return model
     modulus = scene.material.contact_modulus

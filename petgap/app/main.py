@@ -26,13 +26,17 @@ job is aborted (``MPI_Abort``), so that no rank is left waiting forever.
 import json
 import sys
 
+import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from petgap.app import run, study
 from petgap.app.argtypes import root_parser
 from petgap.io.scene import Scene, describe_schema
+from petgap.parallel.collective import root_decides
 from petgap.parallel.log import configure, report_failure
+from petgap.surfaces.measured import read_measured
+from petgap.surfaces.topography import MAX_HEIGHT
 from petgap._version import __version__
 
 #: Exit status of a user error (invalid scene, existing output, ...).
@@ -41,6 +45,8 @@ EXIT_USAGE = 2
 
 def _check(args, comm, petsc_args):
     scene = Scene.from_file(args.scene, comm)
+    found = root_decides(comm, lambda: check_topography_file(scene)) \
+        if scene.surface.kind == "file" else None
     if comm.rank == 0:
         for name, section in scene.to_dict().items():
             print(f"[{name}]")
@@ -48,8 +54,33 @@ def _check(args, comm, petsc_args):
                 if v is not None:
                     print(f"{k} = {json.dumps(v)}")
             print()
+        if found:
+            print(f"# topography: {found}")
         print(f"# {args.scene}: valid", flush=True)
     return 0
+
+
+def check_topography_file(scene):
+    """Everything ``petgap run`` would refuse about a scene's topography file, checked on
+    the calling rank by reading it whole (format, channel, shape, data type, undefined and
+    out-of-range heights, units); a line describing it, or ValueError/FileNotFoundError."""
+    s, g = scene.surface, scene.grid
+    unit = None if scene.units.length == "1" else scene.units.length
+    m = read_measured(s.path, channel=s.channel, unit=unit, detrend=s.detrend,
+                      undefined=s.undefined, dataset=s.dataset)
+    if m.heights.shape != tuple(g.shape):
+        raise ValueError(f"topography {s.path} has shape {m.heights.shape}, but the grid is "
+                         f"{tuple(g.shape)} (grid.nx, grid.ny)")
+    largest = float(np.max(np.abs(m.heights))) if m.heights.size else 0.0
+    if largest > MAX_HEIGHT:
+        raise ValueError(f"topography {s.path} holds heights up to {largest:.3g} in magnitude; "
+                         f"at most {MAX_HEIGHT:g} is allowed")
+    size = "" if m.physical_size is None else \
+        f", {m.physical_size[0]:g} x {m.physical_size[1]:g} {m.unit or ''} in the file " \
+        f"(the scene: {g.size[0]:g} x {g.size[1]:g})"
+    return (f"{s.path}: {m.reader}, channel {m.channel}, {m.heights.shape[0]} x "
+            f"{m.heights.shape[1]}{size}, heights in {m.unit or 'the scene units'}"
+            + (f", {m.undefined} undefined points filled" if m.undefined else ""))
 
 
 def _schema(args, comm, petsc_args):

@@ -426,8 +426,11 @@ def _log_statistics(log, stats):
              "    mean height        <h> = %.6g\n"
              "    rms height          h0 = %.6g\n"
              "    rms slope          h0' = %.6g\n"
-             "    rms curvature     h0'' = %.6g",
-             stats.mean, stats.rms_height, stats.rms_slope, stats.rms_curvature)
+             "    rms curvature     h0'' = %.6g%s",
+             stats.mean, stats.rms_height, stats.rms_slope, stats.rms_curvature,
+             "" if stats.rms_slope_fd is None else
+             "\n    rms slope by finite differences: %.6g across the cell's edges, %.6g "
+             "inside the map" % (stats.rms_slope_fd, stats.rms_slope_fd_inner))
 
 
 # ----------------------------------------------------------------------- CLI

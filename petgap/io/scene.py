@@ -459,10 +459,23 @@ class SurfaceSection:
                     "on the number of ranks", when=("kind", ["self-affine"]))
     path: str = key(FilePath(), REQUIRED,
                     "topography file: .npy, or HDF5 (.h5, .hdf5; a petgap result file will do), "
-                    "holding an (nx, ny) array of heights in length units; relative to the scene "
-                    "file's directory", when=("kind", ["file"]))
+                    "holding an (nx, ny) array of heights in length units, or a measured map "
+                    "in any format SurfaceTopography reads (e.g. .ibw, .top, .nc, .mat, text "
+                    "matrix or x-y-z; heights converted to units.length when both units are "
+                    "known); relative to the scene file's directory", when=("kind", ["file"]))
     dataset: str = key(Str(), None, "HDF5 dataset to read (default: \"topography\" if present, "
                        "otherwise the only 2D dataset)", when=("kind", ["file"]))
+    channel: str = key(Str(), None, "data channel of an instrument file with several "
+                       "(default: the file's default channel)", when=("kind", ["file"]))
+    detrend: str = key(Choice("none", "center", "height", "slope", "curvature"), "none",
+                       "trend removed from the map (SurfaceTopography's modes): its mean "
+                       "(center), the least-squares plane (height), the plane of the mean "
+                       "slope (slope) or the least-squares quadratic surface (curvature)",
+                       when=("kind", ["file"]))
+    undefined: str = key(Choice("refuse", "harmonic"), "refuse",
+                         "undefined points (NaN, masked) in the map: refuse it, or fill them "
+                         "with the harmonic function that matches their surroundings",
+                         when=("kind", ["file"]))
 
     @staticmethod
     def _check(values, ctx, problems):

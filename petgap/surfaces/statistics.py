@@ -36,12 +36,17 @@ class SurfaceStatistics:
         ``h0' = sqrt(<|grad h|^2>)``.
     rms_curvature : float
         ``h0'' = sqrt(<(laplacian h)^2>) / 2``.
+    rms_slope_fd, rms_slope_fd_inner : float or None
+        The rms slope by finite differences across the cell's edges and inside the map
+        only (:func:`finite_difference_slopes`), where computed.
     """
 
     mean: float
     rms_height: float
     rms_slope: float
     rms_curvature: float
+    rms_slope_fd: float = None
+    rms_slope_fd_inner: float = None
 
 
 def statistics(grid, h_local):
@@ -141,3 +146,50 @@ def check_local_field(grid, h_local, name):
             raise ValueError(f"{name} on rank {rank} has shape {problem[0]}, but that rank's slab "
                              f"of the {grid.nx} x {grid.ny} grid is {problem[1]}")
     return h_local
+
+
+def finite_difference_slopes(grid, h_local):
+    """The rms slope by finite differences, across the cell's edges and inside the map only.
+
+    ``(periodic, inner)``: ``sqrt(<(dh/dx)^2> + <(dh/dy)^2>)`` from the forward differences
+    of neighbouring pixels, averaged over all ``nx ny`` pairs of each direction with
+    the wrap-around pairs (the last row and column against the first) included, and
+    over the ``(nx - 1) ny`` and ``nx (ny - 1)`` pairs inside the map only.  On a
+    periodic surface the two agree (the wrap-around pairs are like any others); on a
+    measured map whose opposite edges do not match, the jump at the seam raises the
+    first: the test of whether a map may be solved as periodic.  Collective (one row
+    from the next rank); the same on every rank.
+    """
+    h_local = check_local_field(grid, h_local, "h_local")
+    comm, nx, ny = grid.comm, grid.nx, grid.ny
+    rows = h_local.shape[0]
+    # the first row of the next rank that has rows (cyclically): who holds which rows
+    starts = comm.allgather((grid.x_slice.start, rows))
+    owners = [r for r, (_, n) in enumerate(starts) if n > 0]
+    nxt = prev = None
+    if rows:
+        k = owners.index(comm.rank)
+        nxt, prev = owners[(k + 1) % len(owners)], owners[(k - 1) % len(owners)]
+    below = np.empty(ny)
+    if rows:
+        if len(owners) == 1:
+            below[:] = h_local[0]
+        else:
+            comm.Sendrecv(np.ascontiguousarray(h_local[0]), dest=prev, recvbuf=below, source=nxt)
+    sums = np.zeros(4)   # x: inner, seam; y: inner, seam
+    if rows:
+        dx = np.diff(h_local, axis=0)
+        sums[0] += np.sum(dx ** 2)
+        last = (below - h_local[-1]) ** 2
+        if grid.x_slice.stop == nx:
+            sums[1] += np.sum(last)          # the wrap-around pairs of x
+        else:
+            sums[0] += np.sum(last)
+        sums[2] += np.sum(np.diff(h_local, axis=1) ** 2)
+        sums[3] += np.sum((h_local[:, 0] - h_local[:, -1]) ** 2)
+    comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+    ax, ay = grid.dx ** -2, grid.dy ** -2
+    periodic = np.sqrt(ax * (sums[0] + sums[1]) / (nx * ny) + ay * (sums[2] + sums[3]) / (nx * ny))
+    inner_x = ax * sums[0] / ((nx - 1) * ny) if nx > 1 else 0.0
+    inner_y = ay * sums[2] / (nx * (ny - 1)) if ny > 1 else 0.0
+    return float(periodic), float(np.sqrt(inner_x + inner_y))

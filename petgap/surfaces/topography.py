@@ -17,16 +17,26 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from petgap.surfaces.measured import load_measured
 from petgap.surfaces.statistics import check_local_field
 
-#: File name extensions load_topography understands.
+#: File name extensions load_topography reads itself, slab by slab (others go to
+#: SurfaceTopography).
 SUFFIXES = (".npy", ".h5", ".hdf5")
 #: Dataset read from an HDF5 file when none is named.
 DEFAULT_DATASET = "topography"
 
 
-def load_topography(grid, path, dataset=None):
+def load_topography(grid, path, dataset=None, *, channel=None, unit=None, detrend="none",
+                    undefined="refuse"):
     """This rank's slab of the topography stored in ``path``.
+
+    ``.npy`` and HDF5 files are read slab by slab; any other file is a measured map
+    read by SurfaceTopography (:mod:`petgap.surfaces.measured`), conditioned as asked
+    (``channel``, ``unit``, ``detrend``, ``undefined``: see
+    :func:`petgap.surfaces.measured.read_measured`; with ``detrend`` or ``undefined =
+    "harmonic"`` a ``.npy`` or HDF5 map is conditioned the same way, read whole on
+    rank 0).
 
     Parameters
     ----------
@@ -56,6 +66,15 @@ def load_topography(grid, path, dataset=None):
     """
     comm = grid.comm
     path = Path(path)
+    own = path.suffix.lower() in SUFFIXES
+    if not own or detrend != "none" or undefined != "refuse":
+        if own and channel is not None:
+            raise ValueError(f"channel={channel!r} is given, but {path} is a "
+                             f"{path.suffix} file (channels exist in instrument files)")
+        local, _ = load_measured(grid, path, channel=channel, unit=unit, detrend=detrend,
+                                 undefined=undefined, dataset=dataset)
+        _check_finite(grid, local, path)
+        return local
     found = None
     if comm.rank == 0:
         try:

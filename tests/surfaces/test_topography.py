@@ -106,8 +106,8 @@ def _bad_files(tmp):
     early[64, 47] = np.nan
     return {
         "missing.npy": (None, FileNotFoundError, ["does not exist"]),
-        "heights.txt": (lambda p: np.savetxt(p, heights), ValueError,
-                        ["unknown extension '.txt'", "allowed: .npy, .h5, .hdf5"]),
+        "notes.txt": (lambda p: p.write_text("measured on a Tuesday\nno heights here\n"),
+                      ValueError, ["notes.txt", "SurfaceTopography does not recognise its format"]),
         "cube.npy": (lambda p: np.save(p, np.zeros((65, 48, 2))), ValueError,
                      ["3D with shape (65, 48, 2)", "must be 2D"]),
         "cube.h5": (lambda p: write_h5(p, topography=np.zeros((65, 48, 2))), ValueError,

@@ -1,0 +1,173 @@
+"""Measured maps in instrument formats, read through SurfaceTopography and conditioned."""
+import logging
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from petgap.app.build import build
+from petgap.io.scene import Scene
+from petgap.parallel.grid import Grid
+from petgap.surfaces.measured import read_measured, surface_topography
+from petgap.surfaces.self_affine import self_affine
+from petgap.surfaces.topography import load_topography, save_topography_npy
+
+DATA = Path(__file__).resolve().parent.parent / "data" / "topographies"
+
+#: file: (reader, shape, physical size or None, unit or None)
+FORMATS = {
+    "10x10-one_channel_without_name.ibw": ("IBWReader", (10, 10), (10.0, 10.0), None),
+    "nc-1.nc": ("NCReader", (5, 10), (5.0, 10.0), "nm"),
+    "top-1.top": ("WSXMReader", (256, 256), (600.0, 600.0), "nm"),
+    "txt_example.txt": ("AscReader", (6, 3), (1e-6, 5e-7), "m"),
+    "matrix-5.txt": ("AscReader", (10, 10), None, None),
+    "xyz-1.txt": ("XYZReader", (4, 4), (4.0, 4.0), None),
+}
+
+
+def direct(path):
+    """The same file read by SurfaceTopography directly, as a reference."""
+    reader = surface_topography().open_topography(str(path))
+    channel = reader.default_channel
+    kwargs = {} if channel.physical_sizes is not None else \
+        {"physical_sizes": tuple(float(n) for n in channel.nb_grid_pts)}
+    return reader.topography(**kwargs)
+
+
+@pytest.mark.parametrize("name", sorted(FORMATS))
+def test_formats_read_as_surface_topography_reads_them(name):
+    reader, shape, size, unit = FORMATS[name]
+    m = read_measured(DATA / name)
+    assert m.reader == reader and m.heights.shape == shape and m.unit == unit
+    assert m.physical_size == (None if size is None else pytest.approx(size, rel=1e-12))
+    np.testing.assert_array_equal(m.heights, np.ma.getdata(direct(DATA / name).heights()))
+    assert np.all(np.isfinite(m.heights)) and m.undefined == 0
+
+
+def test_xyz_heights_are_the_files_numbers():
+    m = read_measured(DATA / "xyz-1.txt")
+    expected = np.ones((4, 4))
+    expected[1, 1] = expected[1, 2] = 2.0      # the file's z column
+    np.testing.assert_array_equal(m.heights, expected)
+
+
+def test_units_are_converted_to_the_one_asked_for():
+    nm = read_measured(DATA / "top-1.top")
+    um = read_measured(DATA / "top-1.top", unit="um")
+    assert um.unit == "um" and um.physical_size == pytest.approx((0.6, 0.6))
+    np.testing.assert_allclose(um.heights, nm.heights / 1000, rtol=1e-12)
+    with pytest.raises(ValueError, match="top-1.top: cannot convert its unit 'nm' to 'furlong'"):
+        read_measured(DATA / "top-1.top", unit="furlong")
+
+
+def test_matlab_file_round_trip(tmp_path):
+    import scipy.io  # deferred: SciPy only where a .mat file is written
+    heights = np.random.default_rng(2).standard_normal((12, 9))
+    scipy.io.savemat(tmp_path / "map.mat", {"heights": heights})
+    m = read_measured(tmp_path / "map.mat")
+    assert m.reader == "MatReader"
+    np.testing.assert_array_equal(m.heights, heights)
+
+
+@pytest.mark.parametrize("mode, trend", [
+    ("center", lambda x, y: 3.5 + 0 * x),
+    ("height", lambda x, y: 0.2 - 0.03 * x + 0.07 * y),
+    ("slope", lambda x, y: 0.2 - 0.03 * x + 0.07 * y),
+    ("curvature", lambda x, y: 1.0 + 0.1 * x - 0.2 * y + 0.01 * x * x - 0.02 * x * y
+     + 0.005 * y * y),
+])
+def test_detrend_removes_its_trend_exactly(tmp_path, mode, trend):
+    x, y = np.meshgrid(np.arange(20.0), np.arange(14.0), indexing="ij")
+    np.save(tmp_path / "trend.npy", trend(x, y))
+    m = read_measured(tmp_path / "trend.npy", detrend=mode)
+    assert np.max(np.abs(m.heights)) < 1e-10 * np.max(np.abs(trend(x, y)))
+    if mode != "center":       # a weaker detrend leaves something
+        weaker = {"height": "center", "slope": "center", "curvature": "height"}[mode]
+        assert np.max(np.abs(read_measured(tmp_path / "trend.npy", detrend=weaker).heights)) \
+            > 1e-3
+
+
+def test_undefined_points_are_refused_or_filled(tmp_path):
+    heights = np.random.default_rng(3).standard_normal((16, 12))
+    holey = heights.copy()
+    holey[5, 6] = holey[5, 7] = np.nan
+    np.save(tmp_path / "holey.npy", holey)
+    with pytest.raises(ValueError, match='2 undefined points.*surface.undefined = "harmonic"'):
+        read_measured(tmp_path / "holey.npy")
+    m = read_measured(tmp_path / "holey.npy", undefined="harmonic")
+    assert m.undefined == 2 and np.all(np.isfinite(m.heights))
+    defined = np.isfinite(holey)
+    np.testing.assert_array_equal(m.heights[defined], heights[defined])
+    # harmonic: each filled point is the mean of its four neighbours (to the solver's accuracy)
+    for i, j in ((5, 6), (5, 7)):
+        around = (m.heights[i - 1, j] + m.heights[i + 1, j] + m.heights[i, j - 1]
+                  + m.heights[i, j + 1]) / 4
+        assert m.heights[i, j] == pytest.approx(around, abs=1e-6)
+
+
+def test_unrecognised_file_and_line_scan_are_refused(tmp_path):
+    (tmp_path / "notes.txt").write_text("measured on a Tuesday\n")
+    with pytest.raises(ValueError, match="SurfaceTopography does not recognise its format"):
+        read_measured(tmp_path / "notes.txt")
+    (tmp_path / "line.txt").write_text("\n".join(f"{0.1 * i} {np.sin(i)}" for i in range(20)))
+    with pytest.raises(ValueError, match="is a line scan with"):
+        read_measured(tmp_path / "line.txt")
+    with pytest.raises(ValueError, match="no channel 'height'"):
+        read_measured(DATA / "nc-1.nc", channel="height")
+
+
+def test_scattered_slabs_are_the_map(comm):
+    """Read on rank 0 and scattered: the slabs put together are the file's map."""
+    grid = Grid((256, 256), size=(600.0, 600.0), comm=comm, planner="estimate", wisdom=False)
+    local = load_topography(grid, DATA / "top-1.top", unit="nm")
+    whole = np.concatenate(comm.allgather(local))
+    np.testing.assert_array_equal(whole, read_measured(DATA / "top-1.top").heights)
+    with pytest.raises(ValueError, match=r"shape \(256, 256\), but the grid is \(128, 256\)"):
+        load_topography(Grid((128, 256), comm=comm, planner="estimate", wisdom=False),
+                        DATA / "top-1.top")
+
+
+class Capture(logging.Handler):
+    def __init__(self):
+        super().__init__()
+        self.messages = []
+
+    def emit(self, record):
+        self.messages.append(record.getMessage())
+
+
+def _built_warnings(comm, path, shape):
+    scene = Scene.from_dict({"grid": {"nx": shape[0], "ny": shape[1]},
+                             "surface": {"kind": "file", "path": str(path)},
+                             "control": {"kind": "none"}}, comm)
+    log = logging.getLogger(f"petgap.test.seam.{Path(path).stem}")
+    capture = Capture()
+    log.addHandler(capture)
+    try:
+        model = build(scene, comm, log=log)
+    finally:
+        log.removeHandler(capture)
+    return model, [m for m in capture.messages if "edges do not match" in m]
+
+
+def test_periodicity_warning_fires_on_a_tilted_map_only(comm, mpi_tmp_path):
+    """A tilted 96 x 160 map solved as periodic has a cliff at the seam: warned, with the
+    spectral and both finite-difference slopes; a generated periodic surface is not."""
+    grid = Grid((96, 160), comm=comm, planner="estimate", wisdom=False)
+    h = self_affine(grid, 0.8, 8.0, rms_slope=0.1, seed=2)
+    save_topography_npy(grid, h, mpi_tmp_path / "periodic.npy")
+    x, y = grid.local_positions()
+    save_topography_npy(grid, h + 0.2 * x + 0.1 * y, mpi_tmp_path / "tilted.npy")
+    model, quiet = _built_warnings(comm, mpi_tmp_path / "periodic.npy", (96, 160))
+    assert quiet == []
+    stats = model.statistics
+    assert stats.rms_slope_fd == pytest.approx(stats.rms_slope_fd_inner, rel=0.01)
+    model, loud = _built_warnings(comm, mpi_tmp_path / "tilted.npy", (96, 160))
+    stats = model.statistics
+    assert stats.rms_slope_fd_inner == pytest.approx(np.sqrt(0.1 ** 2 + 0.2 ** 2 + 0.1 ** 2),
+                                                     rel=0.02)
+    assert stats.rms_slope_fd > 5 * stats.rms_slope_fd_inner
+    (message,) = loud
+    assert "tilted.npy" in message and f"{stats.rms_slope:.4g} spectrally" in message
+    assert f"{stats.rms_slope_fd_inner:.4g} inside the map" in message
+    assert 'surface.detrend = "height"' in message
