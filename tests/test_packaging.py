@@ -36,3 +36,20 @@ def test_every_dependency_is_already_installed_for_pip():
 def test_h5py_is_the_mpi_build_and_not_a_pip_requirement():
     assert "h5py" not in {name.lower() for name in _requirements()}
     assert h5py.get_config().mpi
+
+
+def test_surface_topography_leaves_debians_numpy_and_mpi_h5py():
+    """SurfaceTopography comes from PyPI without its dependencies (scripts/bootstrap.sh):
+    after importing it, NumPy and h5py are still Debian's (h5py the MPI build), and no
+    PyPI numpy or h5py sits in the venv to shadow them after a restart."""
+    import numpy
+    from petgap.surfaces.measured import surface_topography
+    surface_topography()
+    assert numpy.__file__.startswith("/usr/lib/python3/dist-packages/")
+    assert h5py.__file__.startswith("/usr/lib/python3/dist-packages/") and h5py.get_config().mpi
+    for name in ("numpy", "h5py"):
+        try:       # Debian's MPI h5py has no distribution named h5py: nothing to shadow it
+            location = Path(str(importlib.metadata.distribution(name).locate_file("")))
+        except importlib.metadata.PackageNotFoundError:
+            continue
+        assert ".venv" not in location.parts, f"a pip {name} in the venv: {location}"

@@ -35,8 +35,7 @@ from petgap.app.argtypes import root_parser
 from petgap.io.scene import Scene, describe_schema
 from petgap.parallel.collective import root_decides
 from petgap.parallel.log import configure, report_failure
-from petgap.surfaces.measured import read_measured
-from petgap.surfaces.topography import MAX_HEIGHT
+from petgap.surfaces.topography import MAX_HEIGHT, read_map
 from petgap._version import __version__
 
 #: Exit status of a user error (invalid scene, existing output, ...).
@@ -66,8 +65,8 @@ def check_topography_file(scene):
     out-of-range heights, units); a line describing it, or ValueError/FileNotFoundError."""
     s, g = scene.surface, scene.grid
     unit = None if scene.units.length == "1" else scene.units.length
-    m = read_measured(s.path, channel=s.channel, unit=unit, detrend=s.detrend,
-                      undefined=s.undefined, dataset=s.dataset)
+    m = read_map(s.path, s.dataset, channel=s.channel, unit=unit, detrend=s.detrend,
+                 undefined=s.undefined)
     if m.heights.shape != tuple(g.shape):
         raise ValueError(f"topography {s.path} has shape {m.heights.shape}, but the grid is "
                          f"{tuple(g.shape)} (grid.nx, grid.ny)")

@@ -24,7 +24,6 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from petgap.parallel.collective import root_decides
 
 #: Trend removal of :func:`read_measured`: SurfaceTopography's ``detrend`` modes
 #: (``center``: the mean; ``height``: the plane of least squares, which minimises the rms
@@ -72,26 +71,20 @@ def surface_topography():
     return SurfaceTopography
 
 
-def _own_format(path, dataset):
-    """A ``.npy`` or HDF5 map as a SurfaceTopography topography (pixel-sized, no unit)."""
-    st = surface_topography()
-    suffix = str(path).lower().rsplit(".", 1)[-1]
-    if suffix == "npy":
-        heights = np.load(path)
-    else:
-        # deferred: h5py is imported by the topography module, which picks its MPI build
-        from petgap.surfaces.topography import _choose_dataset, _import_h5py
-        with _import_h5py().File(path, "r") as f:
-            heights = f[_choose_dataset(f, dataset, path)][...]
+def condition_map(heights, path, *, detrend="none", undefined="refuse"):
+    """A map already read (``.npy``, HDF5: no unit, pixel-sized), conditioned like a measured
+    one (:func:`read_measured`); its :class:`Measurement`.  ``path`` names it in errors."""
     heights = np.asarray(heights)
     if heights.ndim != 2 or heights.dtype.kind != "f":
         raise ValueError(f"topography {path} holds a {heights.ndim}D {heights.dtype} array; "
                          f"a topography is a 2D floating-point array")
-    return st.Topography(np.ma.masked_invalid(heights), tuple(float(n) for n in heights.shape))
+    topography = surface_topography().Topography(np.ma.masked_invalid(heights),
+                                                 tuple(float(n) for n in heights.shape))
+    return _condition(path, topography, "petgap", "(the array)", None, detrend, undefined,
+                      None)
 
 
-def read_measured(path, *, channel=None, unit=None, detrend="none", undefined="refuse",
-                  dataset=None):
+def read_measured(path, *, channel=None, unit=None, detrend="none", undefined="refuse"):
     """Read and condition a measured map with SurfaceTopography (the calling rank alone).
 
     Parameters
@@ -125,9 +118,6 @@ def read_measured(path, *, channel=None, unit=None, detrend="none", undefined="r
         raise FileNotFoundError(f"topography file {path} does not exist")
     if not Path(path).is_file():
         raise ValueError(f"topography path {path} is not a file")
-    if str(path).lower().endswith((".npy", ".h5", ".hdf5")):
-        return _condition(path, _own_format(path, dataset), "petgap", "(the array)", unit,
-                          detrend, undefined, None)
     st = surface_topography()
     try:
         with contextlib.redirect_stdout(io.StringIO()):
@@ -197,27 +187,3 @@ def scatter_rows(grid, heights):
     else:
         comm.Scatterv(None, local, root=0)
     return local
-
-
-def load_measured(grid, path, **conditions):
-    """This rank's slab of a measured map, and its :class:`Measurement` without heights
-    (on every rank).  Collective; ``conditions`` are those of :func:`read_measured`.
-
-    The map must have the grid's shape; ValueError on every rank otherwise.
-    """
-    def read():
-        m = read_measured(path, **conditions)
-        if m.heights.shape != tuple(grid.shape):
-            raise ValueError(f"topography {path} has shape {m.heights.shape}, but the grid is "
-                             f"{tuple(grid.shape)}")
-        return m
-    held = {}
-
-    def decide():
-        held["m"] = read()
-        m = held["m"]
-        return Measurement(None, m.physical_size, m.unit, m.periodic, m.reader, m.channel,
-                           m.undefined)
-    about = root_decides(grid.comm, decide)
-    local = scatter_rows(grid, held["m"].heights if grid.comm.rank == 0 else None)
-    return local, about

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from petgap.surfaces.measured import load_measured
+from petgap.parallel.collective import root_decides
+from petgap.surfaces.measured import condition_map, read_measured, scatter_rows
 from petgap.surfaces.statistics import check_local_field
 
 #: File name extensions load_topography reads itself, slab by slab (others go to
@@ -68,11 +69,16 @@ def load_topography(grid, path, dataset=None, *, channel=None, unit=None, detren
     path = Path(path)
     own = path.suffix.lower() in SUFFIXES
     if not own or detrend != "none" or undefined != "refuse":
-        if own and channel is not None:
-            raise ValueError(f"channel={channel!r} is given, but {path} is a "
-                             f"{path.suffix} file (channels exist in instrument files)")
-        local, _ = load_measured(grid, path, channel=channel, unit=unit, detrend=detrend,
-                                 undefined=undefined, dataset=dataset)
+        def read():
+            m = read_map(path, dataset, channel=channel, unit=unit, detrend=detrend,
+                         undefined=undefined)
+            if m.heights.shape != tuple(grid.shape):
+                raise ValueError(f"topography {path} has shape {m.heights.shape}, but the grid "
+                                 f"is {tuple(grid.shape)}")
+            held.append(m.heights)
+        held = []
+        root_decides(comm, read)
+        local = scatter_rows(grid, held[0] if comm.rank == 0 else None)
         _check_finite(grid, local, path)
         return local
     found = None
@@ -103,6 +109,36 @@ def load_topography(grid, path, dataset=None, *, channel=None, unit=None, detren
 
     _check_finite(grid, local, path if name is None else f"{path}:{name}")
     return local
+
+
+def read_map(path, dataset=None, *, channel=None, unit=None, detrend="none",
+             undefined="refuse"):
+    """A whole map, read and conditioned on the calling rank alone: its
+    :class:`petgap.surfaces.measured.Measurement`.
+
+    ``.npy`` and HDF5 files are read here (they carry no unit or size), every other
+    file by SurfaceTopography (:func:`petgap.surfaces.measured.read_measured`); both
+    are then conditioned alike (``detrend``, ``undefined``).  For ``petgap check``
+    and for runs that condition a map; plain runs read ``.npy`` and HDF5 slab by slab.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in SUFFIXES:
+        if dataset is not None:
+            raise ValueError(f"dataset={dataset!r} is given, but {path} is not an HDF5 file "
+                             f"(instrument files have channels: surface.channel)")
+        return read_measured(path, channel=channel, unit=unit, detrend=detrend,
+                             undefined=undefined)
+    if channel is not None:
+        raise ValueError(f"channel={channel!r} is given, but {path} is a {path.suffix} file "
+                         f"(channels exist in instrument files)")
+    kind, name = _inspect(path, dataset, None)
+    if kind == "npy":
+        heights = np.load(path)
+    else:
+        with _import_h5py().File(path, "r") as f:
+            heights = f[name][...]
+    return condition_map(heights, path if name is None else f"{path}:{name}", detrend=detrend,
+                         undefined=undefined)
 
 
 def save_topography_npy(grid, h_local, path):
@@ -198,7 +234,7 @@ def _check_layout(what, file_shape, dtype, shape):
     if np.dtype(dtype).kind != "f":
         raise ValueError(f"topography {what} has data type {np.dtype(dtype)}, which is not "
                          f"floating point; heights must be float16, float32 or float64")
-    if tuple(file_shape) != tuple(shape):
+    if shape is not None and tuple(file_shape) != tuple(shape):
         raise ValueError(f"topography {what} has shape {tuple(file_shape)}, but the grid is "
                          f"{tuple(shape)}")
 

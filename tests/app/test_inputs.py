@@ -10,6 +10,7 @@ import subprocess
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from conftest import clean_env, wait_for_root
@@ -157,3 +158,56 @@ def test_memory_refusal_under_an_address_space_limit(comm, mpi_tmp_path):
     assert "use more ranks" in err and "a smaller grid" in err
     assert "planning FFTs" not in proc.stdout and not out.exists()
     assert seconds < 30
+
+
+CHECK_SCENE = """
+[grid]
+nx = 16
+ny = 12
+
+[surface]
+kind = "file"
+path = "{path}"
+
+[control]
+kind = "load"
+values = [0.002]
+"""
+
+
+def test_check_reads_the_topography_file(comm, mpi_tmp_path, run_cli):
+    """``petgap check`` refuses what ``petgap run`` would about the file, before any solve:
+    an unrecognised format, a line scan, the wrong shape, integer heights, undefined points,
+    a 3D array; and describes a good file."""
+    rng = np.random.default_rng(4)
+    files = {
+        "good.npy": lambda p: np.save(p, rng.standard_normal((16, 12))),
+        "notes.txt": lambda p: p.write_text("measured on a Tuesday\n"),
+        "line.txt": lambda p: p.write_text("\n".join(f"{0.1 * i} {i % 3}" for i in range(20))),
+        "wide.npy": lambda p: np.save(p, np.zeros((16, 13))),
+        "integer.npy": lambda p: np.save(p, np.zeros((16, 12), dtype=np.int32)),
+        "holey.npy": lambda p: np.save(p, np.where(np.eye(16, 12) > 0, np.nan, 1.0)),
+        "cube.npy": lambda p: np.save(p, np.zeros((16, 12, 2))),
+    }
+    expected = {
+        "notes.txt": ["SurfaceTopography does not recognise its format"],
+        "line.txt": ["is a line scan"],
+        "wide.npy": ["shape (16, 13)", "grid is (16, 12)"],
+        "integer.npy": ["int32", "not floating point"],
+        "holey.npy": ["12 undefined points", 'surface.undefined = "harmonic"'],
+        "cube.npy": ["3D with shape (16, 12, 2)"],
+    }
+    if comm.rank == 0:
+        for name, make in files.items():
+            make(mpi_tmp_path / name)
+            (mpi_tmp_path / f"{name}.toml").write_text(CHECK_SCENE.format(path=name))
+    comm.Barrier()
+    good = run_cli(["petgap", "check", mpi_tmp_path / "good.npy.toml"], ranks=2)
+    assert good.returncode == 0, good.stderr
+    assert "# topography:" in good.stdout and "good.npy: petgap" in good.stdout
+    for name, fragments in expected.items():
+        proc = run_cli(["petgap", "check", mpi_tmp_path / f"{name}.toml"], ranks=2)
+        assert proc.returncode == 2, (name, proc.stdout, proc.stderr)
+        assert proc.stderr.count("petgap: error:") == 1 and "Traceback" not in proc.stderr
+        for fragment in fragments:
+            assert fragment in proc.stderr, (name, fragment, proc.stderr)

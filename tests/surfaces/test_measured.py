@@ -9,6 +9,7 @@ from petgap.app.build import build
 from petgap.io.scene import Scene
 from petgap.parallel.grid import Grid
 from petgap.surfaces.measured import read_measured, surface_topography
+from petgap.surfaces.topography import read_map
 from petgap.surfaces.self_affine import self_affine
 from petgap.surfaces.topography import load_topography, save_topography_npy
 
@@ -79,11 +80,11 @@ def test_matlab_file_round_trip(tmp_path):
 def test_detrend_removes_its_trend_exactly(tmp_path, mode, trend):
     x, y = np.meshgrid(np.arange(20.0), np.arange(14.0), indexing="ij")
     np.save(tmp_path / "trend.npy", trend(x, y))
-    m = read_measured(tmp_path / "trend.npy", detrend=mode)
+    m = read_map(tmp_path / "trend.npy", detrend=mode)
     assert np.max(np.abs(m.heights)) < 1e-10 * np.max(np.abs(trend(x, y)))
     if mode != "center":       # a weaker detrend leaves something
         weaker = {"height": "center", "slope": "center", "curvature": "height"}[mode]
-        assert np.max(np.abs(read_measured(tmp_path / "trend.npy", detrend=weaker).heights)) \
+        assert np.max(np.abs(read_map(tmp_path / "trend.npy", detrend=weaker).heights)) \
             > 1e-3
 
 
@@ -93,8 +94,8 @@ def test_undefined_points_are_refused_or_filled(tmp_path):
     holey[5, 6] = holey[5, 7] = np.nan
     np.save(tmp_path / "holey.npy", holey)
     with pytest.raises(ValueError, match='2 undefined points.*surface.undefined = "harmonic"'):
-        read_measured(tmp_path / "holey.npy")
-    m = read_measured(tmp_path / "holey.npy", undefined="harmonic")
+        read_map(tmp_path / "holey.npy")
+    m = read_map(tmp_path / "holey.npy", undefined="harmonic")
     assert m.undefined == 2 and np.all(np.isfinite(m.heights))
     defined = np.isfinite(holey)
     np.testing.assert_array_equal(m.heights[defined], heights[defined])
@@ -171,3 +172,17 @@ def test_periodicity_warning_fires_on_a_tilted_map_only(comm, mpi_tmp_path):
     assert "tilted.npy" in message and f"{stats.rms_slope:.4g} spectrally" in message
     assert f"{stats.rms_slope_fd_inner:.4g} inside the map" in message
     assert 'surface.detrend = "height"' in message
+
+
+def test_conditioned_npy_is_scattered_like_the_whole_map(comm, mpi_tmp_path):
+    grid = Grid((24, 20), comm=comm, planner="estimate", wisdom=False)
+    x, y = np.meshgrid(np.arange(24.0), np.arange(20.0), indexing="ij")
+    heights = np.random.default_rng(8).standard_normal((24, 20)) + 0.3 * x - 0.1 * y
+    if comm.rank == 0:
+        np.save(mpi_tmp_path / "tilted.npy", heights)
+    comm.Barrier()
+    local = load_topography(grid, mpi_tmp_path / "tilted.npy", detrend="height")
+    whole = np.concatenate(comm.allgather(local))
+    np.testing.assert_array_equal(whole, read_map(mpi_tmp_path / "tilted.npy",
+                                                  detrend="height").heights)
+    assert abs(whole.mean()) < 1e-12
