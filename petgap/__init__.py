@@ -54,6 +54,7 @@ importing only from those before it:
 ``petgap.reference_solutions``
     Westergaard, Hertz and Johnson closed forms (the module itself).
 ``petgap.app``
+    :func:`load_scene` (a scene file, with what its topography file says filled in),
     :func:`run_scene` (what ``petgap run`` does), :func:`contact` (the one-call
     solve, returning a :class:`ContactResult`).
 
@@ -76,6 +77,7 @@ from petgap.analysis import (  # noqa: E402
     gap_distribution_of, inverse_kappa_att, near_contact_area, near_contact_area_of,
     contact_patches, block_map, fit_kappa_rep, fit_gap_law)
 from petgap.app import ContactResult, run_scene  # noqa: E402
+from petgap.app.build import load_scene  # noqa: E402
 from petgap.app.contact import contact  # noqa: E402  (petgap.app keeps the module's name)
 from petgap.io import Scene, SceneError  # noqa: E402
 from petgap.mechanics import (  # noqa: E402
@@ -109,5 +111,5 @@ __all__ = [
     # reference solutions
     "reference_solutions",
     # app
-    "run_scene", "contact", "ContactResult",
+    "load_scene", "run_scene", "contact", "ContactResult",
 ]

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from mpi4py import MPI
 
 from petgap.app import protocol
-from petgap.io.scene import SceneError
+from petgap.io.scene import Scene, SceneError
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.interactions import ExponentialAdhesion, check_resolution
 from petgap.mechanics.problem import ContactProblem
@@ -35,9 +35,10 @@ from petgap.solvers.dispatch import SOLVER_TYPES
 from petgap.solvers.sweeps import SweepStep, sweep
 from petgap.solvers.tao import check_petsc_options
 from petgap.surfaces.self_affine import self_affine
+from petgap.surfaces.statistics import low_pass
 from petgap.surfaces.statistics import finite_difference_slopes
 from petgap.surfaces.statistics import statistics as surface_statistics
-from petgap.surfaces.topography import load_topography
+from petgap.surfaces.topography import load_topography, map_header
 
 
 #: How much the wrap-around pairs may raise the finite-difference rms slope of a map
@@ -65,6 +66,17 @@ def seam_warning(stats, path):
             f"the map so that its edges match")
 
 
+def load_scene(path, comm=None):
+    """A scene file, validated, with what its topography file says filled in.
+
+    :meth:`petgap.io.scene.Scene.from_file` with the reader of topography files
+    (:func:`petgap.surfaces.topography.map_header`): a scene of ``surface.kind = "file"``
+    may leave out ``grid.nx``, ``grid.ny`` and, if the file knows its physical size,
+    the pixel size, which the file then gives.  Collective, like ``from_file``.
+    """
+    return Scene.from_file(path, comm, read_header=map_header)
+
+
 def make_grid(scene, comm):
     """The :class:`~petgap.parallel.grid.Grid` of a scene on ``comm``."""
     g = scene.grid
@@ -79,8 +91,10 @@ def make_surface(scene, grid):
                            rms_slope=s.rms_slope, rms_height=s.rms_height, seed=s.seed)
     if s.kind == "file":
         unit = None if scene.units.length == "1" else scene.units.length
-        return load_topography(grid, s.path, s.dataset, channel=s.channel, unit=unit,
-                               detrend=s.detrend, undefined=s.undefined)
+        heights = load_topography(grid, s.path, s.dataset, channel=s.channel, unit=unit,
+                                  detrend=s.detrend, undefined=s.undefined)
+        return heights if s.lambda_cutoff is None else \
+            low_pass(grid, heights, 2 * math.pi / s.lambda_cutoff)
     raise ValueError(f"surface.kind = {s.kind!r} is not implemented")  # the schema prevents it
 
 

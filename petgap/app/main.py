@@ -32,7 +32,8 @@ from petsc4py import PETSc
 
 from petgap.app import run, study
 from petgap.app.argtypes import root_parser
-from petgap.io.scene import Scene, describe_schema
+from petgap.app.build import load_scene
+from petgap.io.scene import describe_schema
 from petgap.parallel.collective import root_decides
 from petgap.parallel.log import configure, report_failure
 from petgap.surfaces.topography import MAX_HEIGHT, read_map
@@ -43,7 +44,7 @@ EXIT_USAGE = 2
 
 
 def _check(args, comm, petsc_args):
-    scene = Scene.from_file(args.scene, comm)
+    scene = load_scene(args.scene, comm)
     found = root_decides(comm, lambda: check_topography_file(scene)) \
         if scene.surface.kind == "file" else None
     if comm.rank == 0:

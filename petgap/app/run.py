@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from petgap.app.build import build
+from petgap.app.build import build, load_scene
 from petgap.io.results import (ResultExistsError, ResultFile, check_free_space,
                                 existing_result, output_path_error)
 from petgap.io.lock import ResultLock
-from petgap.io.scene import Scene, schema_default
+from petgap.io.scene import schema_default
 from petgap.mechanics.problem import Load, MeanGap
 from petgap.parallel.collective import root_decides
 from petgap.solvers.convergence import ResidualTrend
@@ -454,7 +454,7 @@ def add_parser(subparsers):
 
 def command(args, comm, petsc_args):
     """``petgap run``: run the scene file and write its result (collective); exit status."""
-    scene = Scene.from_file(args.scene, comm)
+    scene = load_scene(args.scene, comm)
     output = args.output if args.output is not None else f"{Path(args.scene).stem}.h5"
     run_scene(scene, comm, output, overwrite=args.overwrite, petsc_args=petsc_args,
               strict=args.strict)

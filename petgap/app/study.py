@@ -57,9 +57,8 @@ from mpi4py import MPI
 
 from petgap import analysis
 from petgap.app.argtypes import number_in, positive_float
-from petgap.app.build import build, make_grid, make_surface
+from petgap.app.build import build, load_scene, make_grid, make_surface
 from petgap.app.study_report import StudyError, check_outputs, format_table, write_outputs
-from petgap.io.scene import Scene
 from petgap.parallel.collective import root_decides
 from petgap.parallel.grid import DecompositionError
 from petgap.parallel.log import get_logger
@@ -608,7 +607,7 @@ def command(args, comm, petsc_args=()):
     resolutions = args.resolutions or (QUICK_RESOLUTIONS if args.quick else DEFAULT_RESOLUTIONS)
     output_dir = args.output_dir if args.output_dir is not None else \
         Path(f"{Path(args.scene).stem}-study")
-    scene = Scene.from_file(args.scene, comm)
+    scene = load_scene(args.scene, comm)
     check_scene(scene)
     check_outputs(output_dir, args.overwrite, comm)  # before any expensive work
     log = get_logger("study")

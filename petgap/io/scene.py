@@ -84,6 +84,10 @@ class _Invalid(Exception):
         self.problem, self.allowed = problem, allowed
 
 
+class _Missing(Exception):
+    """A derived default that cannot be derived: the message says why (an error)."""
+
+
 class _Skip(Exception):
     """A value cannot be checked because something it depends on was invalid."""
 
@@ -384,15 +388,93 @@ MAX_PIXELS = 2**31 - 1
 _LARGEST = 1.7976931348623157e308
 
 
+def _file_grid(ctx):
+    """What a scene's topography file says about the grid, or None (no file surface).
+
+    ``{"shape": (nx, ny), "size": (Lx, Ly) or None}``, the size in the scene's
+    ``units.length`` when the file and the scene both name a unit.  Read once per
+    scene, from the raw tables (the surface section is validated after the grid).
+    """
+    if "_file_grid" in ctx:
+        return ctx["_file_grid"]
+    data = ctx.get("_data", {})
+    surface = data.get("surface", {}) if isinstance(data.get("surface"), dict) else {}
+    found = None
+    if surface.get("kind") == "file" and isinstance(surface.get("path"), str):
+        path = Path(surface["path"]).expanduser()
+        if not path.is_absolute():
+            path = Path(ctx["_base_dir"]) / path
+        units = data.get("units", {}) if isinstance(data.get("units"), dict) else {}
+        read_header = ctx.get("_read_header")
+        if read_header is None:
+            found = {"error": "the scene was read without a reader of topography files "
+                              "(petgap.load_scene and the petgap command have one)"}
+        else:
+            try:
+                found = read_header(path, surface.get("dataset"), surface.get("channel"),
+                                    units.get("length", "1"))
+            except Exception as exc:  # the surface section reports the file; no grid from it
+                found = {"error": str(exc)}
+    ctx["_file_grid"] = found
+    return found
+
+
+def _grid_from_file(what):
+    def derive(values, ctx):
+        header = _file_grid(ctx)
+        if header is None:
+            raise _Missing("it is required (unless surface.kind = \"file\", whose file "
+                           "gives it)")
+        if "error" in header:
+            raise _Missing(f"the topography file would give it, but: {header['error']}")
+        if what == "nx":
+            return header["shape"][0]
+        if what == "ny":
+            return header["shape"][1] if not values.get("_given_nx") else \
+                (header["shape"][1] if values["nx"] == header["shape"][0] else values["nx"])
+        size = header["size"]
+        if size is None:
+            return 1.0
+        dx, dy = size[0] / header["shape"][0], size[1] / header["shape"][1]
+        return dx if what == "dx" else dy
+    return derive
+
+
+def _default_ny(values, ctx):
+    header = _file_grid(ctx)
+    if header is not None and "error" not in header and not values.get("_given_nx"):
+        return header["shape"][1]
+    return values["nx"]
+
+
+def _default_a0(values, ctx):
+    header = _file_grid(ctx)
+    if header is None or "error" in header or header["size"] is None:
+        return 1.0
+    return header["size"][0] / header["shape"][0]
+
+
 @dataclass(frozen=True)
 class GridSection:
-    """The periodic grid: ``nx x ny`` pixels of size ``a0``; the system is ``nx a0 x ny a0``."""
-    nx: int = key(Int(minimum=1), REQUIRED, "number of pixels along x (the distributed axis), "
-                  f"at most {MAX_PIXELS}")
-    ny: int = key(Int(minimum=1), Derived(lambda v, ctx: v["nx"], "nx"),
+    """The periodic grid: ``nx x ny`` pixels of ``dx x dy`` (``a0`` both, by default); the
+    system is ``nx dx x ny dy``.  With a topography file, the file gives what the scene
+    leaves out: its pixels and, if it knows its physical size, the pixel size."""
+    nx: int = key(Int(minimum=1), Derived(_grid_from_file("nx"), "the file's, for a "
+                                          "topography file; otherwise required"),
+                  f"number of pixels along x (the distributed axis), at most {MAX_PIXELS}")
+    ny: int = key(Int(minimum=1), Derived(_default_ny, "the file's, for a topography file; "
+                                          "otherwise nx"),
                   f"number of pixels along y, at most {MAX_PIXELS}")
-    a0: float = key(Float(minimum=0, min_open=True), 1.0,
-                    "pixel size, in the length unit of the run")
+    a0: float = key(Float(minimum=0, min_open=True),
+                    Derived(_default_a0, "the file's pixel size along x if it knows its "
+                            "physical size, otherwise 1"),
+                    "pixel size, in the length unit of the run (\"N a0\" lengths count it)")
+    dx: float = key(Float(minimum=0, min_open=True), Derived(lambda v, ctx: (
+        _grid_from_file("dx")(v, ctx) if _sized(ctx) and not v.get("_given_a0") else v["a0"]),
+        "a0 (the file's, if it knows its size)"), "pixel size along x")
+    dy: float = key(Float(minimum=0, min_open=True), Derived(lambda v, ctx: (
+        _grid_from_file("dy")(v, ctx) if _sized(ctx) and not v.get("_given_a0") else v["a0"]),
+        "a0 (the file's, if it knows its size)"), "pixel size along y")
 
     @staticmethod
     def _check(values, ctx, problems):
@@ -417,8 +499,13 @@ class GridSection:
 
     @property
     def size(self):
-        """Physical size ``(Lx, Ly) = (nx a0, ny a0)``."""
-        return (self.nx * self.a0, self.ny * self.a0)
+        """Physical size ``(Lx, Ly) = (nx dx, ny dy)``."""
+        return (self.nx * self.dx, self.ny * self.dy)
+
+
+def _sized(ctx):
+    header = _file_grid(ctx)
+    return header is not None and "error" not in header and header["size"] is not None
 
 
 def _half_smaller_side(values, ctx):
@@ -472,6 +559,11 @@ class SurfaceSection:
                        "(center), the least-squares plane (height), the plane of the mean "
                        "slope (slope) or the least-squares quadratic surface (curvature)",
                        when=("kind", ["file"]))
+    lambda_cutoff: float = key(Length(minimum=0, min_open=True), None,
+                               "short-wavelength cutoff of a measured map: wavelengths "
+                               "shorter than it (|q| > 2 pi / lambda_cutoff) are removed, "
+                               "after the trend; e.g. instrument noise below the tip radius",
+                               when=("kind", ["file"]))
     undefined: str = key(Choice("refuse", "harmonic"), "refuse",
                          "undefined points (NaN, masked) in the map: refuse it, or fill them "
                          "with the harmonic function that matches their surroundings",
@@ -681,7 +773,7 @@ class Scene:
     base_dir: str = "."
 
     @classmethod
-    def from_file(cls, path, comm=None):
+    def from_file(cls, path, comm=None, *, read_header=None):
         """Read and validate a scene file on rank 0 of ``comm`` (default COMM_WORLD).
 
         Every rank returns the same :class:`Scene` or raises the same
@@ -697,28 +789,29 @@ class Scene:
                 raise SceneError(f"scene file {path} not found") from None
             except (OSError, UnicodeDecodeError) as exc:
                 raise SceneError(f"cannot read scene file {path}: {exc}") from None
-            return _parse(text, path.resolve().parent, str(path), str(path))
+            return _parse(text, path.resolve().parent, str(path), str(path), read_header)
 
         return cls._from_root(parse, comm)
 
     @classmethod
-    def from_text(cls, text, comm=None, base_dir=None, source="<scene>"):
+    def from_text(cls, text, comm=None, base_dir=None, source="<scene>", *, read_header=None):
         """Validate scene text (rank 0's copy) and return it on every rank of ``comm``.
 
         ``base_dir`` (default: the current directory) is where relative paths start.
         """
         base = Path(base_dir if base_dir is not None else ".").resolve()
-        return cls._from_root(lambda: _parse(text, base, source, None), comm)
+        return cls._from_root(lambda: _parse(text, base, source, None, read_header), comm)
 
     @classmethod
-    def from_dict(cls, data, comm=None, base_dir=None):
+    def from_dict(cls, data, comm=None, base_dir=None, *, read_header=None):
         """Validate a scene given as nested mappings (``{"grid": {"nx": 256}, ...}``).
 
         For scenes made in code (benchmarks, notebooks, tests): the mappings are
         written as TOML text (the scene's :attr:`text`, as stored in a result
         file) and validated like a file.
         """
-        return cls.from_text(to_toml(data), comm, base_dir=base_dir, source="<scene dict>")
+        return cls.from_text(to_toml(data), comm, base_dir=base_dir, source="<scene dict>",
+                             read_header=read_header)
 
     @classmethod
     def _from_root(cls, parse, comm):
@@ -820,7 +913,7 @@ def _toml_repr(value):
     return text if len(text) <= 80 else text[:77] + "..."
 
 
-def _parse(text, base_dir, source, path):
+def _parse(text, base_dir, source, path, read_header=None):
     """Validate scene text; return the plain payload :func:`_build` turns into a Scene."""
     try:
         data = tomllib.loads(text)
@@ -848,7 +941,7 @@ def _parse(text, base_dir, source, path):
             errors.append(f"{top} = {_toml_repr(value)}: unknown top-level key{hint}; "
                           f"allowed: keys inside the sections {', '.join(names)}")
 
-    ctx = {"_base_dir": str(base_dir)}
+    ctx = {"_base_dir": str(base_dir), "_data": data, "_read_header": read_header}
     payload = {}
     for name, cls, _ in sections:
         table = data.get(name, {})
@@ -926,6 +1019,9 @@ def _parse_section(name, cls, table, ctx, all_keys, errors):
     for k in derived:
         try:
             values[k] = keys[k].default.func(values, ctx)
+        except _Missing as exc:
+            errors.append(f"{name}.{k} is missing: {exc}; allowed: {keys[k].type.allowed()}")
+            invalid.add(k)
         except (_Skip, KeyError):
             invalid.add(k)
 

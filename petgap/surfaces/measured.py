@@ -175,6 +175,41 @@ def _condition(path, topography, reader, channel, unit, detrend, undefined, size
                        reader=reader, channel=channel, undefined=missing)
 
 
+def read_header(path, channel=None, unit=None):
+    """Shape, physical size and unit of a measured map, without its heights (calling rank).
+
+    ``{"shape": (nx, ny), "size": (Lx, Ly) or None, "unit": str or None}``; the size is
+    converted to ``unit`` when the file and ``unit`` both name one.
+    """
+    st = surface_topography()
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            reader = st.open_topography(str(path))
+    except Exception as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"cannot read topography {path}: SurfaceTopography does not recognise "
+                         f"its format ({first})") from None
+    names = [c.name for c in reader.channels]
+    if channel is not None and channel not in names:
+        raise ValueError(f"topography {path} has no channel {channel!r}; channels: "
+                         f"{', '.join(repr(n) for n in names)}")
+    chosen = reader.default_channel if channel is None else reader.channels[names.index(channel)]
+    if chosen.dim != 2:
+        raise ValueError(f"topography {path} (channel {chosen.name!r}) is a line scan with "
+                         f"{chosen.nb_grid_pts} points; petgap needs a 2D map")
+    size, file_unit = chosen.physical_sizes, chosen.unit
+    if size is not None and unit is not None and file_unit is not None and unit != file_unit:
+        from SurfaceTopography.Support.UnitConversion import get_unit_conversion_factor  # deferred: with the package
+        try:
+            factor = get_unit_conversion_factor(file_unit, unit)
+        except Exception as exc:
+            raise ValueError(f"topography {path}: cannot convert its unit {file_unit!r} to "
+                             f"{unit!r}: {exc}") from None
+        size, file_unit = tuple(factor * float(v) for v in size), unit
+    return {"shape": tuple(int(n) for n in chosen.nb_grid_pts),
+            "size": None if size is None else tuple(float(v) for v in size), "unit": file_unit}
+
+
 def scatter_rows(grid, heights):
     """Each rank's rows ``grid.x_slice`` of a global array held by rank 0 (collective)."""
     comm = grid.comm

@@ -193,3 +193,15 @@ def finite_difference_slopes(grid, h_local):
     inner_x = ax * sums[0] / ((nx - 1) * ny) if nx > 1 else 0.0
     inner_y = ay * sums[2] / (nx * (ny - 1)) if ny > 1 else 0.0
     return float(periodic), float(np.sqrt(inner_x + inner_y))
+
+
+def low_pass(grid, h_local, q_cutoff):
+    """The field without its Fourier modes of ``|q| > q_cutoff`` (a sharp spectral cutoff).
+
+    Collective, one transform pair on the grid's buffers (overwritten); returns a new
+    ``local_shape`` array.  The mean and every mode up to the cutoff are kept exactly.
+    """
+    h_local = check_local_field(grid, h_local, "h_local")
+    c = grid.forward(h_local)
+    c[grid.q_magnitude() > q_cutoff] = 0.0
+    return grid.backward() / grid.npoints

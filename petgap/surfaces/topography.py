@@ -18,7 +18,7 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.parallel.collective import root_decides
-from petgap.surfaces.measured import condition_map, read_measured, scatter_rows
+from petgap.surfaces.measured import condition_map, read_header, read_measured, scatter_rows
 from petgap.surfaces.statistics import check_local_field
 
 #: File name extensions load_topography reads itself, slab by slab (others go to
@@ -109,6 +109,27 @@ def load_topography(grid, path, dataset=None, *, channel=None, unit=None, detren
 
     _check_finite(grid, local, path if name is None else f"{path}:{name}")
     return local
+
+
+def map_header(path, dataset=None, channel=None, length_unit="1"):
+    """What a topography file says about its grid, read on the calling rank without its
+    heights: ``{"shape": (nx, ny), "size": (Lx, Ly) or None, "unit": ...}``.
+
+    ``.npy`` and HDF5 maps know only their shape; instrument files (via
+    :func:`petgap.surfaces.measured.read_header`) also their physical size, converted to
+    ``length_unit`` unless that is ``"1"`` (the scene's own unit).  The reader the scene
+    parser uses to take the grid from the file (``Scene.from_file(..., read_header=)``).
+    """
+    path = Path(path)
+    if path.suffix.lower() not in SUFFIXES:
+        return read_header(path, channel, None if length_unit == "1" else length_unit)
+    kind, name = _inspect(path, dataset, None)
+    if kind == "npy":
+        shape = np.load(path, mmap_mode="r").shape
+    else:
+        with _import_h5py().File(path, "r") as f:
+            shape = f[name].shape
+    return {"shape": tuple(int(n) for n in shape), "size": None, "unit": None}
 
 
 def read_map(path, dataset=None, *, channel=None, unit=None, detrend="none",

@@ -3,13 +3,15 @@
 Every test makes all its collective calls before its first assertion, so a
 failure on one rank cannot leave the other waiting in a collective.
 """
+from pathlib import Path
+
 import numpy as np
 import pytest
 from mpi4py import MPI
 
 from petgap.app import protocol
-from petgap.app.build import Model, build, petsc_options_dict
-from petgap.io.scene import Scene
+from petgap.app.build import Model, build, load_scene, petsc_options_dict
+from petgap.io.scene import Scene, SceneError
 from petgap.mechanics.interactions import ExponentialAdhesion, HardWall
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.solvers.sweeps import SweepStep
@@ -127,3 +129,59 @@ def test_surface_and_resolution_check_can_be_given(comm):
 def test_petsc_options_dict():
     assert petsc_options_dict(["-a", "1", "-b", "-c", "-1e-3", "--d", "x"]) == \
         {"a": "1", "b": "", "c": "-1e-3", "d": "x"}
+
+
+# ------------------------------------------------------------ grid from the file
+TOPOGRAPHIES = Path(__file__).resolve().parent.parent / "data" / "topographies"
+
+
+def _scene_file(comm, directory, text):
+    path = directory / "scene.toml"
+    if comm.rank == 0:
+        path.write_text(text)
+    comm.Barrier()
+    return path
+
+
+def test_grid_comes_from_the_file_unless_the_scene_gives_it(comm, mpi_tmp_path):
+    """A file scene may leave out the grid: the file's pixels, and its pixel size where it
+    knows its physical size (converted to units.length); what the scene gives wins."""
+    top = TOPOGRAPHIES / "top-1.top"                         # 256 x 256, 600 x 600 nm
+    bare = f'[surface]\nkind = "file"\npath = "{top}"\n[control]\nkind = "none"\n'
+    scene = load_scene(_scene_file(comm, mpi_tmp_path, bare), comm)
+    assert scene.grid.shape == (256, 256)
+    assert scene.grid.dx == scene.grid.dy == scene.grid.a0 == pytest.approx(600 / 256)
+    in_um = load_scene(_scene_file(comm, mpi_tmp_path, bare + '[units]\nlength = "um"\n'), comm)
+    assert in_um.grid.size == pytest.approx((0.6, 0.6), rel=1e-12)
+    given = load_scene(_scene_file(comm, mpi_tmp_path, bare + "[grid]\na0 = 2.0\n"), comm)
+    assert given.grid.shape == (256, 256) and given.grid.dx == given.grid.dy == 2.0
+    # the pixels of a .npy file, which knows no size: a0 = 1
+    if comm.rank == 0:
+        np.save(mpi_tmp_path / "map.npy", np.zeros((24, 18)))
+    npy = load_scene(_scene_file(comm, mpi_tmp_path, bare.replace(str(top), "map.npy")), comm)
+    assert npy.grid.shape == (24, 18) and npy.grid.a0 == 1.0
+    # without the reader of topography files (Scene.from_file) the grid must be given
+    with pytest.raises(SceneError, match="grid.nx is missing: the topography file would give "
+                                         "it, but: the scene was read without a reader"):
+        Scene.from_file(mpi_tmp_path / "scene.toml", comm)
+
+
+def test_non_square_pixels_from_the_file_are_solved(comm, mpi_tmp_path):
+    """A map of 16 x 12 pixels over 8 x 12 um has pixels of 0.5 x 1 um: the scene's grid
+    and the solve take them."""
+    from petgap.surfaces.measured import surface_topography  # deferred: one test writes a map
+    heights = np.random.default_rng(1).standard_normal((16, 12)) * 0.05
+    if comm.rank == 0:
+        surface_topography().Topography(heights, (8.0, 12.0), unit="um").to_netcdf(
+            str(mpi_tmp_path / "rect.nc"))
+    comm.Barrier()
+    text = ('[surface]\nkind = "file"\npath = "rect.nc"\n[control]\nkind = "load"\n'
+            'values = [0.01]\n[units]\nlength = "um"\n')
+    scene = load_scene(_scene_file(comm, mpi_tmp_path, text), comm)
+    assert scene.grid.shape == (16, 12) and (scene.grid.dx, scene.grid.dy) == (0.5, 1.0)
+    model = build(scene, comm)
+    assert (model.grid.dx, model.grid.dy) == (0.5, 1.0)
+    whole = np.concatenate(comm.allgather(model.topography))
+    np.testing.assert_allclose(whole, heights, rtol=1e-12)
+    state = next(iter(model.sweep()))
+    assert state.converged

@@ -186,3 +186,21 @@ def test_conditioned_npy_is_scattered_like_the_whole_map(comm, mpi_tmp_path):
     np.testing.assert_array_equal(whole, read_map(mpi_tmp_path / "tilted.npy",
                                                   detrend="height").heights)
     assert abs(whole.mean()) < 1e-12
+
+
+def test_lambda_cutoff_removes_the_short_wavelengths_only(comm, mpi_tmp_path):
+    """A file scene's surface.lambda_cutoff: of a long and a short wave, the long one is
+    left exactly (and the mean), the short one is gone."""
+    from petgap.app.build import load_scene  # deferred: the one test that builds a scene
+    x, y = np.meshgrid(np.arange(32.0), np.arange(24.0), indexing="ij")
+    long_wave = 0.3 + np.cos(2 * np.pi * x / 16) * np.sin(2 * np.pi * y / 12)
+    short_wave = 0.2 * np.sin(2 * np.pi * (x / 4 + y / 3))
+    if comm.rank == 0:
+        np.save(mpi_tmp_path / "waves.npy", long_wave + short_wave)
+        (mpi_tmp_path / "waves.toml").write_text(
+            '[surface]\nkind = "file"\npath = "waves.npy"\nlambda_cutoff = "8 a0"\n'
+            '[control]\nkind = "none"\n')
+    comm.Barrier()
+    model = build(load_scene(mpi_tmp_path / "waves.toml", comm), comm)
+    whole = np.concatenate(comm.allgather(model.topography))
+    np.testing.assert_allclose(whole, long_wave, atol=1e-13)
