@@ -44,7 +44,8 @@ class RunResult:
 def describe_surface(scene):
     """One line describing the scene's surface."""
     s, g = scene.surface, scene.grid
-    size = f"{g.nx} x {g.ny} pixels of a0 = {g.a0:g} (L = {g.size[0]:g} x {g.size[1]:g})"
+    pixel = f"a0 = {g.a0:g}" if g.dx == g.dy == g.a0 else f"{g.dx:g} x {g.dy:g}"
+    size = f"{g.nx} x {g.ny} pixels of {pixel} (L = {g.size[0]:g} x {g.size[1]:g})"
     if s.kind == "file":
         where = f"{s.path}" + (f", dataset {s.dataset}" if s.dataset else "")
         return f"topography from {where}, {size}"

@@ -209,7 +209,8 @@ def resolution_ladder(scene, resolutions, max_points=DEFAULT_MAX_POINTS):
         variant = None
         if skipped is None:
             seen[(nx, ny)] = r
-            variant = dataclasses.replace(scene, grid=dataclasses.replace(g, nx=nx, ny=ny, a0=a0))
+            variant = dataclasses.replace(scene, grid=dataclasses.replace(
+                g, nx=nx, ny=ny, a0=a0, dx=a0, dy=a0))
         rungs.append(Rung("resolution", r, variant, nx, ny, a0, skipped=skipped))
     return rungs
 

@@ -354,6 +354,11 @@ def _bad_input_cases(d):
                                'surface.lambda_min = "8 nm": not a length', '"32 a0"',
                                'control.values = ["0.002 MPa"]', "not a number",
                                "[solvr]: unknown section (did you mean [solver]?)"]),
+        # found when the run is built, still before the result file is made
+        ("unresolved-adhesion", SMALL.replace("[control]", '[interaction]\nkind = "exponential"\n'
+                                              'work_of_adhesion = 0.05\nrange = "0.2 a0"\n'
+                                              'resolution_check = "error"\n\n[control]'),
+         ["interaction not resolved by the grid", "range rho = 0.2 is 0.2 pixels"]),
         ("negative-load", SMALL.replace("0.002, 0.004", "0.002, -0.004"),
          ["control.values", "load <= 0 with a hard-wall interaction"]),
         ("topography-nan", FILE_SCENE.format(path="nan.npy", extra=""),
@@ -398,6 +403,11 @@ def test_bad_input_is_one_clean_error(comm, shared):
                             f"missing {missing}, left {proc['leftovers']}:\n{err[-1500:]}")
         if name != "output-is-dir" and Path(args[4]).exists():
             problems.append(f"{name}: {args[4]} was created")
+        out = Path(args[4])
+        left = [p for p in (out.with_name(f".{out.name}.partial"),
+                            out.with_name(f".{out.name}.lock")) if p.exists()]
+        if left:
+            problems.append(f"{name}: left {left}")
     assert not problems, "\n".join(problems)
 
 
