@@ -22,6 +22,7 @@ Conventions
 """
 import hashlib
 import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -102,6 +103,7 @@ class Grid:
         #: Fourier-space FFT buffer, ``(nky_local, nx)``.
         self.fourier = self._fourier_storage[:ln1 * nx].reshape(ln1, nx)
 
+        started = time.perf_counter()
         if wisdom:
             self._load_wisdom()
         self._plans = _fftw_mpi.SlabPlans(self.comm, nx, ny, self._real_storage,
@@ -111,6 +113,9 @@ class Grid:
                                                        self._fourier_storage, planner)
         if wisdom and planner != "estimate":
             self._save_wisdom()
+        #: Seconds spent planning the transforms (with the wisdom cache read and written):
+        #: large the first time a size is planned with ``measure``, small once it is cached.
+        self.planning_time = time.perf_counter() - started
 
         m = np.fft.fftfreq(nx, d=1.0 / nx)
         if nx % 2 == 0:

@@ -37,6 +37,7 @@ from mpi4py import MPI
 
 from petgap.mechanics.problem import ContactProblem
 from petgap.mechanics.half_space import ElasticHalfSpace
+from petgap.parallel.log import get_logger
 from petgap.parallel.grid import DecompositionError, Grid
 
 #: Smallest side of a coarse grid, in points (below it the uniform start is cheap).
@@ -79,6 +80,11 @@ def _make_coarse_problem(problem):
                      planner=grid.planner, wisdom=grid.wisdom)
     except DecompositionError:
         return None  # too few coarse rows for this many ranks: no coarse start
+    # said once per problem, where it was spent: the first run of a size plans with
+    # "measure" (seconds at 4096^2), later runs read the wisdom cache
+    get_logger("coarse").info("coarse grid %dx%d for the start: FFTs planned in %.2f s (%s%s)",
+                              cgrid.nx, cgrid.ny, cgrid.planning_time, cgrid.planner,
+                              ", wisdom cached" if cgrid.wisdom else "")
     h = restrict(grid, cgrid, problem.topography, f)
     return ContactProblem(cgrid, h, ElasticHalfSpace(cgrid, problem.half_space.contact_modulus),
                           problem.interaction)

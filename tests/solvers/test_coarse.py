@@ -114,3 +114,31 @@ def test_coarse_start_on_three_ranks_equals_one(comm, mpi_tmp_path, run_cli):
         assert scalars["iterations"] == one.iterations and scalars["start"] == one.start
         assert np.abs(gap - one.gap).max() <= 1e-12 * problem.gap_scale
         assert np.abs(pressure - one.pressure).max() <= 1e-12 * problem.pressure_scale
+
+
+def test_coarse_planning_time_is_said_once_per_problem(comm):
+    """What planning the coarse grids' FFTs cost is logged where it is spent: once per
+    problem (the coarse problems are kept for a sweep's steps), with the grid and planner."""
+    import logging  # deferred: only this test listens to the log
+    seen = []
+
+    class Listen(logging.Handler):
+        def emit(self, record):
+            seen.append(record.getMessage())
+    logger = logging.getLogger("petgap.coarse")
+    handler, level = Listen(), logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    try:
+        grid = make_grid((256, 256), comm)
+        problem = _rough(grid)
+        for load in (0.01, 0.02):
+            polonsky_keer(problem, Load(load * problem.pressure_scale), tolerance=1e-8)
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+    planned = [m for m in seen if "FFTs planned in" in m]
+    assert [m.split(":")[0] for m in planned] == ["coarse grid 64x64 for the start",
+                                                  "coarse grid 32x32 for the start"]
+    cgrid = coarse_problem(problem).grid
+    assert f"FFTs planned in {cgrid.planning_time:.2f} s ({cgrid.planner}" in planned[0]
