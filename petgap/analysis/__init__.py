@@ -55,7 +55,8 @@ from petgap.analysis.gap_distributions import (  # noqa: F401  (the package's AP
     BINS_PER_DECADE, DEFAULT_RANGE, FIT_RESOLUTION_FACTOR, FIT_X_MAX, FIT_SLOPE_BAND,
     FIT_SLOPE_WINDOW, FIT_MIN_DECADES, FIT_MIN_COUNT, FIT_SIGMAS)
 from petgap.analysis.adhesion import (  # noqa: F401  (the package's API)
-    attractive_force_measured, attractive_force_eq16, inverse_kappa_att, fig4_integrand, AttractiveForce, Eq16Force, GAMMA_2_3)
+    attractive_force_measured, attractive_force_eq16, inverse_kappa_att, fig4_integrand, AttractiveForce, Eq16Force, GAMMA_2_3,
+    attractive_force_by_gap, ForceByGap)
 from petgap.analysis.patches import contact_patches, Patches  # noqa: F401  (the package's API)
 from petgap.analysis.load_curves import fit_kappa_rep, fit_gap_law, KappaFit, GapLawFit, KAPPA_C_MAX  # noqa: F401  (the package's API)
 from petgap.analysis.maps import block_map, decimation_factor, Map, MAX_PIXELS  # noqa: F401  (the package's API)
@@ -67,7 +68,7 @@ __all__ = ["contact_mask", "resolve_gap_tolerance", "GAP_ROUND_OFF", "perimeter"
            "gap_distribution", "collapse", "fit_power_law", "resolved_gap", "auto_fit_range",
            "FitRange", "near_contact_area",
            "near_contact_area_eq14", "attractive_force_measured", "attractive_force_eq16",
-           "inverse_kappa_att", "fig4_integrand", "PerimeterResult", "ContactStatistics",
+           "inverse_kappa_att", "fig4_integrand", "attractive_force_by_gap", "ForceByGap", "PerimeterResult", "ContactStatistics",
            "GapDistribution", "PowerLawFit", "NearContactArea", "AttractiveForce",
            "Eq16Force", "GAMMA_2_3", "contact_statistics_of", "gap_distribution_of",
            "attractive_force_of", "near_contact_area_of", "contact_patches", "Patches",

@@ -180,3 +180,58 @@ def fig4_integrand(x, rho_over_g0, per_log=True):
     rr = r[..., None] if r.ndim else r
     f = x ** (-1.0 / 3.0) * np.exp(-x / rr) / (rr ** (2.0 / 3.0) * GAMMA_2_3)
     return x * f if per_log else f
+
+
+@dataclass(frozen=True)
+class ForceByGap:
+    """Where the measured attractive force comes from, by gap (Fig. 4 from data).
+
+    Attributes
+    ----------
+    x : ndarray
+        Geometric bin centres of ``g / g0`` (logarithmic bins).
+    share : ndarray
+        Share of ``F_att`` per unit ``ln(g / g0)`` in each bin: the measured
+        counterpart of :func:`fig4_integrand` (``x f``).  Its integral over
+        ``ln x`` is the non-contact share of ``F_att``, at most 1.
+    contact_share : float
+        The share of ``F_att`` from pixels in repulsive contact (``g = 0``, not on
+        the log axis), which Eq. 16 leaves out.
+    outside_share : float
+        The share from non-contact pixels with ``g / g0`` outside the bins.
+    """
+    x: np.ndarray
+    share: np.ndarray
+    contact_share: float
+    outside_share: float
+
+
+def attractive_force_by_gap(grid, gap, pressure, v_prime, g0, *, bins_per_decade=10,
+                            x_range=(1e-5, 1e2), gap_tolerance=None):
+    """The measured ``F_att`` resolved by ``x = g / g0``, per unit ``ln x`` (collective).
+
+    Each non-contact pixel adds ``-dx dy v'(g)`` to the bin of its ``g / g0``;
+    the bins are divided by ``F_att`` and by their width in ``ln x``.  Pixels in
+    repulsive contact (:func:`contact_mask`) are counted apart.  The result is the
+    same on every rank.
+    """
+    derivative = getattr(v_prime, "derivative", v_prime)
+    g0 = positive("g0", g0)
+    checked = check_fields(grid, gap=gap, pressure=pressure)
+    gap, pressure = checked["gap"], checked["pressure"]
+    contact = contact_mask(gap, pressure, resolve_gap_tolerance(grid, gap, gap_tolerance))
+    stress = np.asarray(derivative(gap), dtype=float)
+    lo, hi = (float(v) for v in x_range)
+    nbins = int(round(bins_per_decade * math.log10(hi / lo)))
+    edges = np.geomspace(lo, hi, nbins + 1)
+    x = gap[~contact] / g0
+    sums, _ = np.histogram(x, bins=edges, weights=stress[~contact])
+    local = np.concatenate([sums, [float(np.sum(stress[contact])), float(np.sum(stress))]])
+    total = global_sums(grid.comm, *local)
+    bins, in_contact, everything = np.asarray(total[:nbins]), total[nbins], total[nbins + 1]
+    if everything == 0:
+        raise ValueError("the interaction stress is zero everywhere: no attractive force")
+    share = bins / everything / np.diff(np.log(edges))
+    outside = (everything - in_contact - float(np.sum(bins))) / everything
+    return ForceByGap(x=np.sqrt(edges[:-1] * edges[1:]), share=share,
+                      contact_share=in_contact / everything, outside_share=outside)

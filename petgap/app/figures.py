@@ -212,13 +212,25 @@ def figure3(series, path):
             "Adhesive gap distributions (Fig. 3)", fontsize=7)
 
 
-def figure4(path):
+def figure4(path, data=()):
+    """Fig. 4: the integrand of Eq. 16 for the paper's ``rho / g0``, and, for each adhesive
+    step in ``data`` (``(label, force_by_gap dict)``), the measured share of ``F_att``
+    per unit ``ln(g/g0)`` (:func:`petgap.analysis.attractive_force_by_gap`) beside the
+    analytic curve at its own ``rho / g0`` (dotted)."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(5.5, 4.2))
     x = np.geomspace(1e-5, 1e2, 400)
     curves = analysis.fig4_integrand(x, FIG4_RHO_OVER_G0)
     for r, y in zip(FIG4_RHO_OVER_G0, curves):
         ax.semilogx(x, y, label=f"$\\rho/g_0$ = {r:g}")
+    for label, found in data:
+        r = found["rho_over_g0"]
+        keep = np.asarray(found["share"]) > 0
+        line, = ax.semilogx(np.asarray(found["x"])[keep], np.asarray(found["share"])[keep],
+                            "o", ms=3, mfc="none",
+                            label=f"{label}: data, $\\rho/g_0$ = {r:.3g} (contact "
+                                  f"{found['contact_share']:.0%})")
+        ax.semilogx(x, analysis.fig4_integrand(x, r), ":", color=line.get_color(), lw=1)
     _finish(fig, ax, path, "$g/g_0$", r"$x\,f(x)$: share of $F_{att}$ per unit $\ln(g/g_0)$",
             "Integrand of Eq. 16 (Fig. 4)", fontsize=8)
 

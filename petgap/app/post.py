@@ -434,6 +434,12 @@ def analyse_step(result, index, args, grids, comm, log, surface=None):
                                                             stats.contact_area),
                    kappa_rep=scale / f_rep if f_rep > 0 else math.nan)
         if usable:
+            by_gap = analysis.attractive_force_by_gap(grid, gap, pressure,
+                                                      ExponentialAdhesion(w, rho), g0,
+                                                      gap_tolerance=tol)
+            force_by_gap = {"x": by_gap.x.tolist(), "share": by_gap.share.tolist(),
+                            "contact_share": by_gap.contact_share,
+                            "outside_share": by_gap.outside_share, "rho_over_g0": rho / g0}
             eq16 = analysis.attractive_force_eq16(w, rho, g0, stats.contact_area)
             row.update(F_att_eq16_printed=eq16.printed, F_att_eq16_exact=eq16.exact,
                        inv_kappa_att_eq16_printed=analysis.inverse_kappa_att(
@@ -441,6 +447,7 @@ def analyse_step(result, index, args, grids, comm, log, surface=None):
                        inv_kappa_att_eq16_exact=analysis.inverse_kappa_att(
                            eq16.exact, slope, modulus, stats.contact_area))
     meta = {"lambda_min_a0": lmin / dx if lmin else None, "rho": rho, "reference_step": ref_step,
+            "force_by_gap": force_by_gap if adhesive and usable else None,
             "solve": solve_identity(result, index, attrs, kind, w, rho)}
     finite = [k for k in ("exponent", "exponent_fit_range")
               if row[k] is not None and math.isfinite(row[k])]
@@ -702,6 +709,10 @@ def write_tables(results, args, groups, fig2, fig3, sweeps=None):
                               "reference": s.is_reference, "label": s.label} for s in fig3]},
         "rows": rows,
         "sweeps": {path: fits.to_dict() for path, fits in (sweeps or {}).items()},
+        "force_by_gap": [dict(file=r.row["file"], step=r.row["step"],
+                              **{k: plain(v) if not isinstance(v, list) else v
+                                 for k, v in r.meta["force_by_gap"].items()})
+                         for r in results if r.meta.get("force_by_gap")],
         "distributions": [{"file": r.row["file"], "step": r.row["step"],
                            "edges": r.distribution.edges.tolist(),
                            "counts": r.distribution.counts.tolist(),
@@ -938,7 +949,9 @@ def _run(args, inputs, comm, log):
             if groups:
                 figure3(fig3, d / f"{FIG3_STEM}.{fmt}")
                 add(f"{FIG3_STEM}.{fmt}", "Adhesive gap distributions (Fig. 3)", "fig3")
-        figure4(d / f"{FIG4_STEM}.{fmt}")
+        figure4(d / f"{FIG4_STEM}.{fmt}",
+                [(f"{Path(r.row['file']).name}:{r.row['step']}", r.meta["force_by_gap"])
+                 for r in results if r.meta.get("force_by_gap")])
         add(f"{FIG4_STEM}.{fmt}", "Integrand of Eq. 16 (Fig. 4)", "fig4")
         for path, stem in stems.items():
             view = surfaces.get(path)

@@ -601,6 +601,13 @@ def test_post_cli_tables_and_figures(comm, mpi_tmp_path, run_cli):
     assert r1["F_att_eq16_exact"] / r1["F_att_eq16_printed"] == pytest.approx(math.gamma(2 / 3))
     assert r0["chain"] == "reference" and r1["reference_step"] == 0
     assert r0["c_solver"] == 0.123 and r1["c_solver"] is None   # the solver's value, tabled
+    # Fig. 4 from the adhesive step's data: its shares add up with the contact's to ~1
+    (by_gap,) = doc["force_by_gap"]
+    assert (by_gap["file"], by_gap["step"]) == (str(run), 1)
+    assert by_gap["rho_over_g0"] == pytest.approx(rho / r1["g0"], rel=1e-12)
+    widths = np.diff(np.log(by_gap["x"]))[0]
+    assert sum(by_gap["share"]) * widths + by_gap["contact_share"] + by_gap["outside_share"] \
+        == pytest.approx(1.0, rel=1e-9)
     assert doc["fig3_references"] == [{"file": str(run), "step": 0, "c": r0["c"], "g0": r0["g0"],
                                        "normalised_steps": [[str(run), 1]], "duplicates": []}]
     header = (out / "gap-analysis.csv").read_text().splitlines()[0].split(",")
@@ -791,3 +798,31 @@ def test_post_cli_fit_range(comm, mpi_tmp_path, run_cli):
     assert (row["fit_range_x_min"], row["fit_range_x_max"]) == (0.002, 0.05)
     assert doc["fit_range"]["option"] == [0.002, 0.05]
     assert reversed_.returncode == 2 and "--fit-range LO HI needs LO < HI" in reversed_.stderr
+
+
+def test_force_by_gap_puts_each_pixels_force_in_its_bin(comm):
+    """Fig. 4 from data: the force of each non-contact pixel lands in the bin of its g/g0,
+    per unit ln(g/g0); contact pixels count apart; the shares add up to 1."""
+    shape = (40, 30)
+    grid = Grid(shape, comm=comm, planner="estimate")
+    law = ExponentialAdhesion(0.01, 0.5)
+    g0 = 2.0
+    gap = np.zeros(shape)
+    pressure = np.zeros(shape)
+    pressure[:10] = 0.1                     # in contact: g = 0, p > 0
+    gap[10:25] = 0.02 * g0                  # all in one bin
+    gap[25:] = 3.0 * g0
+    gl, pl = local(grid, gap, pressure)
+    found = analysis.attractive_force_by_gap(grid, gl, pl, law, g0, bins_per_decade=10)
+    total = law.derivative(0.0) * 300 + law.derivative(0.02 * g0) * 450 \
+        + law.derivative(3.0 * g0) * 450
+    assert found.contact_share == pytest.approx(law.derivative(0.0) * 300 / total, rel=1e-12)
+    widths = np.log(10) / 10
+    k = np.searchsorted(found.x, 0.02, side="right") - 1
+    hit = np.abs(np.log(found.x / 0.02)) <= widths / 2 + 1e-12
+    assert hit.sum() == 1
+    assert found.share[hit][0] * widths == pytest.approx(
+        law.derivative(0.02 * g0) * 450 / total, rel=1e-12)
+    integral = float(np.sum(found.share) * widths)
+    assert integral + found.contact_share + found.outside_share == pytest.approx(1.0, rel=1e-12)
+    assert abs(found.outside_share) < 1e-12 and k >= 0     # every gap within the bins
