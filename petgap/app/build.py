@@ -36,7 +36,7 @@ from petgap.solvers.sweeps import SweepStep, sweep
 from petgap.solvers.tao import check_petsc_options
 from petgap.surfaces.self_affine import self_affine
 from petgap.surfaces.statistics import low_pass
-from petgap.surfaces.statistics import finite_difference_slopes
+from petgap.surfaces.statistics import finite_difference_curvature, finite_difference_slopes
 from petgap.surfaces.statistics import statistics as surface_statistics
 from petgap.surfaces.topography import load_topography, map_header
 
@@ -295,7 +295,9 @@ class Model:
         """Mean, rms height, slope and curvature of the surface (collective on first use)."""
         stats = surface_statistics(self.grid, self.topography)
         periodic, inner = finite_difference_slopes(self.grid, self.topography)
-        return dataclasses.replace(stats, rms_slope_fd=periodic, rms_slope_fd_inner=inner)
+        curvature = finite_difference_curvature(self.grid, self.topography)
+        return dataclasses.replace(stats, rms_slope_fd=periodic, rms_slope_fd_inner=inner,
+                                   rms_curvature_fd_inner=curvature)
 
     @property
     def solve_options(self):

@@ -129,7 +129,8 @@ from petgap.parallel.collective import root_decides  # noqa: E402
 from petgap.parallel.grid import DecompositionError, Grid  # noqa: E402
 from petgap.parallel.log import configure, report_failure  # noqa: E402
 from petgap.surfaces.self_affine import psd_shape  # noqa: E402
-from petgap.surfaces.statistics import radial_psd, statistics  # noqa: E402
+from petgap.surfaces.statistics import (finite_difference_curvature,  # noqa: E402
+                                        finite_difference_slopes, radial_psd, statistics)
 from petgap._version import __version__
 
 #: Exit status of a user error.
@@ -177,7 +178,8 @@ PATCH_COLUMNS = ["file", "step", "patch", "pixels", "area", "perimeter_pixel_edg
                  "first_pixel"]
 SURFACE_STEM = "surface-statistics"
 SURFACE_COLUMNS = ["file", "nx", "ny", "dx", "dy", "mean", "rms_height", "rms_slope",
-                   "rms_curvature", "kind", "hurst", "lambda_min", "lambda_max"]
+                   "rms_curvature", "rms_slope_fd", "rms_slope_fd_inner",
+                   "rms_curvature_fd_inner", "kind", "hurst", "lambda_min", "lambda_max"]
 
 
 class PostError(ValueError):
@@ -526,6 +528,8 @@ def analyse_surface(result, args, grids, comm):
     grid = _grid(grids, shape, dx, dy, comm, str(result.path))
     heights = read_field(f, "topography", grid)
     stats = statistics(grid, heights)
+    slope_fd, slope_fd_inner = finite_difference_slopes(grid, heights)
+    curvature_fd = finite_difference_curvature(grid, heights)
     q, psd = radial_psd(grid, heights)
     kind, _ = attrs.find(["surface.kind"], "surface kind", required=False, kind=str)
     model, label = None, ""
@@ -547,7 +551,9 @@ def analyse_surface(result, args, grids, comm):
                 "model": None if model is None else model.tolist()}
     row = {"file": str(result.path), "nx": shape[0], "ny": shape[1], "dx": dx, "dy": dy,
            "mean": stats.mean, "rms_height": stats.rms_height, "rms_slope": stats.rms_slope,
-           "rms_curvature": stats.rms_curvature, "kind": kind,
+           "rms_curvature": stats.rms_curvature, "rms_slope_fd": slope_fd,
+           "rms_slope_fd_inner": slope_fd_inner, "rms_curvature_fd_inner": curvature_fd,
+           "kind": kind,
            "hurst": attrs.find(["surface.hurst"], "Hurst exponent", required=False)[0],
            "lambda_min": attrs.find(["surface.lambda_min"], "lambda_min", required=False)[0],
            "lambda_max": attrs.find(["surface.lambda_max"], "lambda_max", required=False)[0],
@@ -646,6 +652,10 @@ def check_outputs(args):
 SURFACE_CONVENTIONS = {
     "rms_height, rms_slope, rms_curvature": "spectral (petgap.surfaces.statistics), the mean "
                                             "removed; h0'' = sqrt(<(laplacian h)^2>) / 2",
+    "rms_slope_fd, rms_slope_fd_inner": "by forward differences, with the wrap-around pairs "
+                                        "and inside the map only (their gap: the seam)",
+    "rms_curvature_fd_inner": "five-point Laplacian at the points whose neighbours lie "
+                              "inside the map",
     "psd": "C(q) = A0 |h_q|^2 / N^2, radially averaged on logarithmic bins "
            "(petgap.surfaces.statistics.radial_psd); model: Eq. 5 with C0 from the rms height",
 }

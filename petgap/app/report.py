@@ -35,7 +35,10 @@ STATUS_COLUMNS = [
 SURFACE_COLUMNS = [
     ("nx", "nx", "d"), ("ny", "ny", "d"), ("dx", "dx", ".4g"), ("dy", "dy", ".4g"),
     ("rms_height", "h0", ".4g"), ("rms_slope", "h0'", ".4g"),
-    ("rms_curvature", "h0''", ".4g"), ("kind", "surface", "s"), ("hurst", "H", ".3g"),
+    ("rms_curvature", "h0''", ".4g"), ("rms_slope_fd", "h0' (FD, periodic)", ".4g"),
+    ("rms_slope_fd_inner", "h0' (FD, inside)", ".4g"),
+    ("rms_curvature_fd_inner", "h0'' (FD, inside)", ".4g"), ("kind", "surface", "s"),
+    ("hurst", "H", ".3g"),
     ("lambda_min", "lambda_min", ".4g"), ("lambda_max", "lambda_max", ".4g"),
 ]
 

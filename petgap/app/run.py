@@ -430,8 +430,9 @@ def _log_statistics(log, stats):
              "    rms curvature     h0'' = %.6g%s",
              stats.mean, stats.rms_height, stats.rms_slope, stats.rms_curvature,
              "" if stats.rms_slope_fd is None else
-             "\n    rms slope by finite differences: %.6g across the cell's edges, %.6g "
-             "inside the map" % (stats.rms_slope_fd, stats.rms_slope_fd_inner))
+             "\n    by finite differences: rms slope %.6g across the cell's edges, %.6g "
+             "inside the map; rms curvature %.6g inside the map"
+             % (stats.rms_slope_fd, stats.rms_slope_fd_inner, stats.rms_curvature_fd_inner))
 
 
 # ----------------------------------------------------------------------- CLI

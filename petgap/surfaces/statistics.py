@@ -39,6 +39,9 @@ class SurfaceStatistics:
     rms_slope_fd, rms_slope_fd_inner : float or None
         The rms slope by finite differences across the cell's edges and inside the map
         only (:func:`finite_difference_slopes`), where computed.
+    rms_curvature_fd_inner : float or None
+        The rms curvature by finite differences inside the map
+        (:func:`finite_difference_curvature`), where computed.
     """
 
     mean: float
@@ -47,6 +50,7 @@ class SurfaceStatistics:
     rms_curvature: float
     rms_slope_fd: float = None
     rms_slope_fd_inner: float = None
+    rms_curvature_fd_inner: float = None
 
 
 def statistics(grid, h_local):
@@ -205,3 +209,41 @@ def low_pass(grid, h_local, q_cutoff):
     c = grid.forward(h_local)
     c[grid.q_magnitude() > q_cutoff] = 0.0
     return grid.backward() / grid.npoints
+
+
+def finite_difference_curvature(grid, h_local):
+    """The rms curvature by finite differences inside the map: ``sqrt(<(lap h)^2>) / 2``.
+
+    The five-point Laplacian ``(h[i+1,j] + h[i-1,j] - 2 h) / dx^2 + (h[i,j+1] + h[i,j-1] -
+    2 h) / dy^2`` at the ``(nx - 2)(ny - 2)`` points whose neighbours all lie inside the
+    map (no wrap-around), the convention of :func:`statistics`' spectral ``h0''``; exact
+    for quadratic surfaces, so it measures a map's curvature without its seam.
+    Collective (a row from each neighbouring rank); the same on every rank; NaN for a
+    map narrower than 3 pixels.
+    """
+    h_local = check_local_field(grid, h_local, "h_local")
+    comm, nx, ny = grid.comm, grid.nx, grid.ny
+    start, rows = grid.x_slice.start, h_local.shape[0]
+    if nx < 3 or ny < 3:
+        return float("nan")
+    slabs = comm.allgather((start, rows))
+    owners = [r for r, (_, n) in enumerate(slabs) if n > 0]
+    above = np.full(ny, np.nan)       # global row start - 1
+    below = np.full(ny, np.nan)       # global row start + rows
+    if rows and len(owners) > 1:
+        k = owners.index(comm.rank)
+        prev = owners[k - 1] if k > 0 else MPI.PROC_NULL
+        nxt = owners[k + 1] if k + 1 < len(owners) else MPI.PROC_NULL
+        comm.Sendrecv(np.ascontiguousarray(h_local[-1]), dest=nxt, recvbuf=above, source=prev)
+        comm.Sendrecv(np.ascontiguousarray(h_local[0]), dest=prev, recvbuf=below, source=nxt)
+    total = 0.0
+    if rows:
+        ext = np.vstack([above[None, :], h_local, below[None, :]])
+        centre = ext[1:-1, 1:-1]
+        lap = ((ext[2:, 1:-1] + ext[:-2, 1:-1] - 2 * centre) / grid.dx ** 2
+               + (ext[1:-1, 2:] + ext[1:-1, :-2] - 2 * centre) / grid.dy ** 2)
+        first = 1 if start == 0 else 0                    # global rows 1 .. nx - 2 only
+        last = rows - 1 if start + rows == nx else rows
+        total = float(np.sum(lap[first:last] ** 2))
+    total = comm.allreduce(total, op=MPI.SUM)
+    return float(np.sqrt(total / ((nx - 2) * (ny - 2))) / 2)
