@@ -84,6 +84,27 @@ def condition_map(heights, path, *, detrend="none", undefined="refuse"):
                       None)
 
 
+def _open_channel(path, channel):
+    """SurfaceTopography's reader of ``path`` and its 2D data channel (by name, or the
+    file's default); ValueError naming the file otherwise."""
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            reader = surface_topography().open_topography(str(path))
+    except Exception as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"cannot read topography {path}: SurfaceTopography does not recognise "
+                         f"its format ({first})") from None
+    names = [c.name for c in reader.channels]
+    if channel is not None and channel not in names:
+        raise ValueError(f"topography {path} has no channel {channel!r}; channels: "
+                         f"{', '.join(repr(n) for n in names)}")
+    chosen = reader.default_channel if channel is None else reader.channels[names.index(channel)]
+    if chosen.dim != 2:
+        raise ValueError(f"topography {path} (channel {chosen.name!r}) is a line scan with "
+                         f"{chosen.nb_grid_pts} points; petgap needs a 2D map")
+    return reader, chosen
+
+
 def read_measured(path, *, channel=None, unit=None, detrend="none", undefined="refuse"):
     """Read and condition a measured map with SurfaceTopography (the calling rank alone).
 
@@ -118,26 +139,7 @@ def read_measured(path, *, channel=None, unit=None, detrend="none", undefined="r
         raise FileNotFoundError(f"topography file {path} does not exist")
     if not Path(path).is_file():
         raise ValueError(f"topography path {path} is not a file")
-    st = surface_topography()
-    try:
-        with contextlib.redirect_stdout(io.StringIO()):
-            reader = st.open_topography(str(path))
-    except Exception as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ValueError(f"cannot read topography {path}: SurfaceTopography does not recognise "
-                         f"its format ({first})") from None
-    channels = reader.channels
-    names = [c.name for c in channels]
-    if channel is None:
-        chosen = reader.default_channel
-    elif channel in names:
-        chosen = channels[names.index(channel)]
-    else:
-        raise ValueError(f"topography {path} has no channel {channel!r}; channels: "
-                         f"{', '.join(repr(n) for n in names)}")
-    if chosen.dim != 2:
-        raise ValueError(f"topography {path} (channel {chosen.name!r}) is a line scan with "
-                         f"{chosen.nb_grid_pts} points; petgap needs a 2D map")
+    reader, chosen = _open_channel(path, channel)
     sizes = chosen.physical_sizes
     kwargs = {} if sizes is not None else {"physical_sizes": tuple(float(n) for n in
                                                                    chosen.nb_grid_pts)}
@@ -181,22 +183,7 @@ def read_header(path, channel=None, unit=None):
     ``{"shape": (nx, ny), "size": (Lx, Ly) or None, "unit": str or None}``; the size is
     converted to ``unit`` when the file and ``unit`` both name one.
     """
-    st = surface_topography()
-    try:
-        with contextlib.redirect_stdout(io.StringIO()):
-            reader = st.open_topography(str(path))
-    except Exception as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ValueError(f"cannot read topography {path}: SurfaceTopography does not recognise "
-                         f"its format ({first})") from None
-    names = [c.name for c in reader.channels]
-    if channel is not None and channel not in names:
-        raise ValueError(f"topography {path} has no channel {channel!r}; channels: "
-                         f"{', '.join(repr(n) for n in names)}")
-    chosen = reader.default_channel if channel is None else reader.channels[names.index(channel)]
-    if chosen.dim != 2:
-        raise ValueError(f"topography {path} (channel {chosen.name!r}) is a line scan with "
-                         f"{chosen.nb_grid_pts} points; petgap needs a 2D map")
+    _, chosen = _open_channel(path, channel)
     size, file_unit = chosen.physical_sizes, chosen.unit
     if size is not None and unit is not None and file_unit is not None and unit != file_unit:
         from SurfaceTopography.Support.UnitConversion import get_unit_conversion_factor  # deferred: with the package
