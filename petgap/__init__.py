@@ -37,8 +37,9 @@ importing only from those before it:
 ``petgap.io``
     :class:`Scene` (a run described by a TOML file), :class:`SceneError`.
 ``petgap.mechanics``
-    :class:`ElasticHalfSpace`, :class:`HardWall`, :class:`ExponentialAdhesion`,
-    the controls :class:`Load` and :class:`MeanGap`, :class:`ContactProblem`,
+    :class:`ElasticHalfSpace` (periodic), :class:`FreeHalfSpace` (no images),
+    :class:`HardWall`, :class:`ExponentialAdhesion`, the controls :class:`Load`,
+    :class:`MeanGap` and :class:`Indentation`, :class:`ContactProblem`,
     :class:`ContactSolution`.
 ``petgap.solvers``
     :func:`solve`, :func:`sweep`.
@@ -81,8 +82,8 @@ from petgap.app.build import load_scene  # noqa: E402
 from petgap.app.contact import contact  # noqa: E402  (petgap.app keeps the module's name)
 from petgap.io import Scene, SceneError  # noqa: E402
 from petgap.mechanics import (  # noqa: E402
-    ContactProblem, ContactSolution, ElasticHalfSpace, ExponentialAdhesion, HardWall, Load,
-    MeanGap)
+    ContactProblem, ContactSolution, ElasticHalfSpace, ExponentialAdhesion, FreeHalfSpace,
+    HardWall, Indentation, Load, MeanGap)
 from petgap.parallel import Grid  # noqa: E402
 from petgap.solvers import solve, sweep  # noqa: E402
 from petgap.surfaces import load_topography, radial_psd, save_topography_npy  # noqa: E402
@@ -98,7 +99,8 @@ __all__ = [
     # io
     "Scene", "SceneError",
     # mechanics
-    "ElasticHalfSpace", "HardWall", "ExponentialAdhesion", "Load", "MeanGap",
+    "ElasticHalfSpace", "FreeHalfSpace", "HardWall", "ExponentialAdhesion", "Load", "MeanGap",
+    "Indentation",
     "ContactProblem", "ContactSolution",
     # solvers
     "solve", "sweep",

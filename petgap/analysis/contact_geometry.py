@@ -199,7 +199,7 @@ class PerimeterResult:
 
 
 def perimeter(grid, gap=None, pressure=None, contact_modulus=None, mask=None, *,
-              gap_tolerance=None, sweeps=PERIMETER_SWEEPS):
+              gap_tolerance=None, sweeps=PERIMETER_SWEEPS, periodic=True):
     """Contact perimeter ``P_rep`` by marching squares with asymptotic edge crossings.
 
     Why not count pixel edges: a staircase along an edge at angle ``theta`` is
@@ -262,6 +262,11 @@ def perimeter(grid, gap=None, pressure=None, contact_modulus=None, mask=None, *,
         Zero-gap tolerance of the contact set (default: :func:`resolve_gap_tolerance`).
     sweeps : int
         Angle-correction sweeps (0 switches the correction off).
+    periodic : bool
+        The map is a periodic cell (default).  If not (a map solved on a free
+        boundary), the cells and pixel edges that join the last row or column
+        to the first are left out: where a contact meets the map's edge, the
+        edge is not a contact line.
 
     Returns
     -------
@@ -300,11 +305,17 @@ def perimeter(grid, gap=None, pressure=None, contact_modulus=None, mask=None, *,
         inside = np.concatenate([below[0] > 0.5, mask, above[0] > 0.5])
         values = (Extended(gap, below[1], above[1]), Extended(pressure, below[2], above[2])) \
             if fields else None
+        seam_row = None if periodic else nx - 1 - start + halo   # the cells of row nx - 1
         length, counts = _perimeter_block(inside, values, halo, nloc, dx, dy, contact_modulus,
-                                          sweeps)
+                                          sweeps, seam_row)
         # raw pixel edges of the owned rows: x-neighbours to the next row, y-neighbours in it
-        ex = np.count_nonzero(mask != inside[halo + 1:halo + nloc + 1])
-        ey = np.count_nonzero(mask != np.roll(mask, -1, axis=1))
+        xedges = mask != inside[halo + 1:halo + nloc + 1]
+        yedges = mask != np.roll(mask, -1, axis=1)
+        if not periodic:
+            if stop == nx:
+                xedges[-1] = False
+            yedges[:, -1] = False
+        ex, ey = np.count_nonzero(xedges), np.count_nonzero(yedges)
     total = global_sums(grid.comm, [length, counts[0], counts[1]])
     edges = global_sums(grid.comm, [ex, ey], dtype=np.int64)
     return PerimeterResult(perimeter=float(total[0]), pixel_edges=int(edges.sum()),
@@ -313,7 +324,7 @@ def perimeter(grid, gap=None, pressure=None, contact_modulus=None, mask=None, *,
                            method=method)
 
 
-def _perimeter_block(inside, values, halo, nloc, dx, dy, modulus, sweeps):
+def _perimeter_block(inside, values, halo, nloc, dx, dy, modulus, sweeps, seam_row=None):
     """Marching squares on an extended block of rows; length of the owned cells' contour.
 
     ``inside`` is the contact set on the extended rows (bool, ``(nloc + 2 halo,
@@ -321,6 +332,9 @@ def _perimeter_block(inside, values, halo, nloc, dx, dy, modulus, sweeps):
     crossings).  Rows ``halo .. halo + nloc - 1`` are owned; the block is open at
     its two ends (the halo is wide enough that this does not reach the owned
     cells) and periodic along y.  Only cells on the contour are ever stored.
+
+    With ``seam_row`` (a non-periodic map) the cells of that row and of the last
+    column, which join the map's opposite edges, are not counted.
 
     Returns ``(length, [segments, saddles])`` of the owned cells.
     """
@@ -415,6 +429,8 @@ def _perimeter_block(inside, values, halo, nloc, dx, dy, modulus, sweeps):
         ycos = _edge_cosines(y_cells, (3, 1), qx, qy, has, ty, dx, dy, along_x=False)
 
     owned = (ce >= halo) & (ce < halo + nloc)
+    if seam_row is not None:
+        owned &= (ce != seam_row) & (cj != ny - 1)
     seg = np.where(has, np.hypot(px - qx, py - qy), 0.0)
     length = 0.5 * float(np.sum(seg[owned]))  # each segment seen from both ends
     nseg = 0.5 * float(np.count_nonzero(has[owned]))
@@ -514,7 +530,7 @@ class ContactStatistics:
 
 
 def contact_statistics(grid, gap, pressure, rms_slope, contact_modulus, *, gap_tolerance=None,
-                       sweeps=PERIMETER_SWEEPS):
+                       sweeps=PERIMETER_SWEEPS, periodic=True):
     """``c``, ``A_rep``, ``P_rep``, ``d_rep`` (Eq. 2) and ``g0`` (Eq. 12) of a solved state.
 
     Parameters
@@ -527,7 +543,7 @@ def contact_statistics(grid, gap, pressure, rms_slope, contact_modulus, *, gap_t
         ``E*``.
     gap_tolerance : float, optional
         Zero-gap tolerance (default: :func:`resolve_gap_tolerance`).
-    sweeps : int
+    sweeps, periodic
         See :func:`perimeter`.
 
     Returns
@@ -539,7 +555,8 @@ def contact_statistics(grid, gap, pressure, rms_slope, contact_modulus, *, gap_t
     checked = check_fields(grid, gap=gap, pressure=pressure)
     gap, pressure = checked["gap"], checked["pressure"]
     mask = contact_mask(gap, pressure, resolve_gap_tolerance(grid, gap, gap_tolerance))
-    per = perimeter(grid, gap, pressure, contact_modulus, mask=mask, sweeps=sweeps)
+    per = perimeter(grid, gap, pressure, contact_modulus, mask=mask, sweeps=sweeps,
+                    periodic=periodic)
     local = [np.count_nonzero(mask), float(np.sum(pressure[mask])), float(np.sum(pressure))]
     total = global_sums(grid.comm, local)
     nx, ny = global_shape(grid)

@@ -24,7 +24,7 @@ def contact_statistics_of(problem, solution, *, gap_tolerance=None, sweeps=PERIM
     """
     return contact_statistics(problem.grid, solution.gap, solution.pressure, problem.rms_slope,
                               problem.half_space.contact_modulus, gap_tolerance=gap_tolerance,
-                              sweeps=sweeps)
+                              sweeps=sweeps, periodic=problem.half_space.periodic)
 
 
 def gap_distribution_of(problem, solution, bins=None, gmin=None, gmax=None, *,

@@ -4,7 +4,7 @@
 :class:`~petgap.io.scene.Scene` into the same objects the same way, so that a
 number measured by one of them is a number of the others::
 
-    scene -> grid -> topography -> half-space -> problems (hard wall, adhesive)
+    scene -> grid -> topography -> half-space (periodic or free) -> problems (hard wall, adhesive)
           -> planned steps (petgap.app.protocol) -> sweep (petgap.solvers.sweeps)
 
 A scene made in code works as one read from a file::
@@ -26,6 +26,7 @@ from mpi4py import MPI
 
 from petgap.app import protocol
 from petgap.io.scene import Scene, SceneError
+from petgap.mechanics.free_half_space import FreeHalfSpace
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.interactions import ExponentialAdhesion, check_resolution
 from petgap.mechanics.problem import ContactProblem
@@ -34,6 +35,7 @@ from petgap.parallel.log import get_logger, timed
 from petgap.solvers.dispatch import SOLVER_TYPES
 from petgap.solvers.sweeps import SweepStep, sweep
 from petgap.solvers.tao import check_petsc_options
+from petgap.surfaces.indenters import KINDS as INDENTERS, indenter
 from petgap.surfaces.self_affine import self_affine
 from petgap.surfaces.statistics import low_pass
 from petgap.surfaces.statistics import finite_difference_curvature, finite_difference_slopes
@@ -95,6 +97,8 @@ def make_surface(scene, grid):
                                   detrend=s.detrend, undefined=s.undefined)
         return heights if s.lambda_cutoff is None else \
             low_pass(grid, heights, 2 * math.pi / s.lambda_cutoff)
+    if s.kind in INDENTERS:
+        return indenter(grid, s.kind, s.radius)
     raise ValueError(f"surface.kind = {s.kind!r} is not implemented")  # the schema prevents it
 
 
@@ -368,14 +372,15 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
     args = list(scene.solver.petsc_args()) + list(petsc_args)
     model = Model(scene=scene, grid=grid, topography=topography, steps=steps,
                   petsc_args=args, options=petsc_options_dict(args))
-    if scene.surface.kind == "file":
+    if scene.surface.kind == "file" and scene.surface.periodic:
         seam = seam_warning(model.statistics, scene.surface.path)
         if seam:
             log.warning(seam)
     if not model.steps:
         return model
     modulus = scene.material.contact_modulus
-    model.half_space = ElasticHalfSpace(grid, modulus)
+    model.half_space = (ElasticHalfSpace(grid, modulus) if scene.surface.periodic
+                        else FreeHalfSpace(grid, modulus))
     model.problem = ContactProblem(grid, topography, model.half_space)
     interaction = scene.interaction
     if interaction.kind == "exponential":

@@ -351,13 +351,15 @@ def analyse_step(result, index, args, grids, comm, log, surface=None):
     pressure = read_field(group, "pressure", grid)
 
     tol = analysis.resolve_gap_tolerance(grid, gap, args.gap_tolerance)
-    stats = analysis.contact_statistics(grid, gap, pressure, slope, modulus, gap_tolerance=tol)
+    periodic, _ = attrs.find(["surface.periodic"], "periodicity", required=False, kind=bool)
+    periodic = True if periodic is None else periodic    # files made before the key existed
+    stats = analysis.contact_statistics(grid, gap, pressure, slope, modulus, gap_tolerance=tol,
+                                        periodic=periodic)
     dist = analysis.gap_distribution(grid, gap, pressure, bins_per_decade=args.bins,
                                      gap_tolerance=tol)
     c, g0 = stats.contact_fraction, stats.g0
-    periodic, _ = attrs.find(["surface.periodic"], "periodicity", required=False, kind=bool)
     mask = analysis.contact_mask(gap, pressure, tol)
-    patches = analysis.contact_patches(grid, mask, periodic=True if periodic is None else periodic)
+    patches = analysis.contact_patches(grid, mask, periodic=periodic)
     maps = {} if surface is None else {"topography": surface.topography}
     for field_name, values in (("gap", gap), ("pressure", pressure), ("contact", mask)):
         maps[field_name] = analysis.block_map(grid, values, max_pixels=args.map_pixels)

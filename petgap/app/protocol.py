@@ -15,7 +15,7 @@ its chain.
 from dataclasses import dataclass
 from typing import Optional
 
-from petgap.mechanics.problem import Load, MeanGap
+from petgap.mechanics.problem import Indentation, Load, MeanGap
 
 
 @dataclass(frozen=True)
@@ -54,7 +54,7 @@ def plan(scene):
     if control.kind == "none":
         return []
     adhesive = scene.interaction.kind == "exponential"
-    make = Load if control.kind == "load" else MeanGap
+    make = {"load": Load, "mean-gap": MeanGap, "indentation": Indentation}[control.kind]
     values = list(control.values)
     if control.reference == "non-adhesive":
         steps = [Step(i, "reference", False, Load(v)) for i, v in enumerate(values)]

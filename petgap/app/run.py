@@ -22,7 +22,7 @@ from petgap.io.results import (ResultExistsError, ResultFile, check_free_space,
                                 existing_result, output_path_error)
 from petgap.io.lock import ResultLock
 from petgap.io.scene import schema_default
-from petgap.mechanics.problem import Load, MeanGap
+from petgap.mechanics.problem import Indentation, Load, MeanGap
 from petgap.parallel.collective import root_decides
 from petgap.solvers.convergence import ResidualTrend
 from petgap.parallel.log import get_logger
@@ -46,9 +46,12 @@ def describe_surface(scene):
     s, g = scene.surface, scene.grid
     pixel = f"a0 = {g.a0:g}" if g.dx == g.dy == g.a0 else f"{g.dx:g} x {g.dy:g}"
     size = f"{g.nx} x {g.ny} pixels of {pixel} (L = {g.size[0]:g} x {g.size[1]:g})"
+    boundary = "periodic" if s.periodic else "free boundary"
     if s.kind == "file":
         where = f"{s.path}" + (f", dataset {s.dataset}" if s.dataset else "")
-        return f"topography from {where}, {size}"
+        return f"topography from {where}, {size}, {boundary}"
+    if s.kind != "self-affine":
+        return f"{s.kind} indenter of radius {s.radius:g} ({s.radius / g.a0:g} a0), {size}, {boundary}"
     target = f"rms slope {s.rms_slope:g}" if s.rms_slope is not None \
         else f"rms height {s.rms_height:g}"
     return (f"self-affine surface, H = {s.hurst:g}, lambda_min = {s.lambda_min:g} "
@@ -344,7 +347,7 @@ def _read_step(result, index, grid, fields):
     group = result.step(index)
     attrs = result.attrs(group)
     kind, value = attrs["solution.control"], attrs["solution.control_value"]
-    control = Load(value) if kind == "load" else MeanGap(value)
+    control = {"load": Load, "mean-gap": MeanGap, "indentation": Indentation}[kind](value)
     gap = result.read_field("gap", grid, group=group) if "gap" in group else None
     pressure = result.read_field("pressure", grid, group=group) if "pressure" in group else None
     zero_gap = None

@@ -515,11 +515,28 @@ def _half_smaller_side(values, ctx):
     return min(grid.size) / 2
 
 
+#: Surface kinds that are indenters (solved on a free boundary unless said otherwise).
+INDENTERS = ("paraboloid", "sphere", "flat-punch", "cylinder")
+
+
+def _default_periodic(values, ctx):
+    if values["kind"] == "self-affine":
+        return True
+    if values["kind"] == "file":
+        header = _file_grid(ctx)
+        return bool(header is not None and "error" not in header and header.get("periodic"))
+    return False
+
+
 @dataclass(frozen=True)
 class SurfaceSection:
     """The rigid rough surface: a self-affine random surface, or a topography file."""
-    kind: str = key(Choice("self-affine", "file"), "self-affine",
-                    "how the topography is made")
+    kind: str = key(Choice("self-affine", "file", *INDENTERS), "self-affine",
+                    "how the topography is made: a self-affine random surface, a "
+                    "topography file, or an indenter centred on the map (paraboloid: "
+                    "Hertz's -r^2 / 2R; sphere: the spherical cap; flat-punch: a flat "
+                    "circular face, the body around it one radius below; cylinder: "
+                    "-x^2 / 2R, its axis along y)")
     hurst: float = key(Float(0, 1, min_open=True, max_open=True), REQUIRED,
                        "Hurst exponent H; the PSD falls as q^-2(1+H) between the cutoffs",
                        when=("kind", ["self-affine"]))
@@ -568,6 +585,16 @@ class SurfaceSection:
                          "undefined points (NaN, masked) in the map: refuse it, or fill them "
                          "with the harmonic function that matches their surroundings",
                          when=("kind", ["file"]))
+
+    radius: float = key(Length(minimum=0, min_open=True), REQUIRED,
+                        "radius of the indenter (of curvature for paraboloid, sphere and "
+                        "cylinder; of the face for flat-punch)", when=("kind", list(INDENTERS)))
+    periodic: bool = key(Bool(), Derived(_default_periodic, "true for a self-affine surface; "
+                                         "for a file what the file says (false if it says "
+                                         "nothing); false for an indenter"),
+                         "solve on a periodic cell (the surface repeats) or on a free "
+                         "boundary (the map alone on an infinite half-space, no images; "
+                         "non-adhesive only)")
 
     @staticmethod
     def _check(values, ctx, problems):
@@ -627,12 +654,12 @@ class _ControlValues(Numbers):
         super().__init__(Float())
 
     def allowed(self):
-        return ("for kind = \"load\": a mean pressure or a list of them; for kind = \"mean-gap\": "
-                "a length > 0 (number or \"<n> a0\") or a list of them")
+        return ("for kind = \"load\": a mean pressure or a list of them; for kind = \"mean-gap\" "
+                "or \"indentation\": a length > 0 (number or \"<n> a0\") or a list of them")
 
     def convert(self, value, ctx):
-        element = Length(minimum=0, min_open=True) if ctx["_section"].get("kind") == "mean-gap" \
-            else Float()
+        element = Length(minimum=0, min_open=True) if ctx["_section"].get("kind") in \
+            ("mean-gap", "indentation") else Float()
         try:
             return Numbers(element).convert(value, ctx)
         except _Invalid as exc:
@@ -651,13 +678,14 @@ class ControlSection:
     same unit as ``material.contact_modulus``; with E* = 1 they are in units of
     E*), positive in compression.
     """
-    kind: str = key(Choice("load", "mean-gap", "none"), "none",
+    kind: str = key(Choice("load", "mean-gap", "indentation", "none"), "none",
                     "load: impose the mean pressure; mean-gap: impose the mean gap; "
-                    "none: only make and analyse the surface")
+                    "indentation: impose the rigid approach past first contact (free "
+                    "boundary only); none: only make and analyse the surface")
     values: tuple = key(_ControlValues(), REQUIRED,
-                        "mean pressures (load; > 0 for a hard wall, any sign with adhesion) or "
-                        "mean gaps (mean-gap; lengths > 0) to sweep",
-                        when=("kind", ["load", "mean-gap"]))
+                        "mean pressures (load; > 0 for a hard wall, any sign with adhesion), "
+                        "mean gaps (mean-gap; lengths > 0) or depths (indentation; lengths "
+                        "> 0) to sweep", when=("kind", ["load", "mean-gap", "indentation"]))
     reference: str = key(Choice("non-adhesive"), None,
                          "non-adhesive: the paper's protocol; values are loads of a non-adhesive "
                          "reference run, and each adhesive step is solved at the mean gap that "
@@ -672,6 +700,17 @@ class ControlSection:
                 and interaction.kind == "hard-wall" and min(vals) <= 0:
             problems.append(("values", list(vals), "has a load <= 0 with a hard-wall interaction",
                              "loads > 0 (a non-adhesive contact cannot carry tension)"))
+        surface = ctx.get("surface")
+        if values["kind"] == "indentation" and surface is not None and surface.periodic:
+            problems.append(("kind", "indentation", "needs a free boundary, and "
+                             "surface.periodic = true (on a periodic cell an approach fixes no "
+                             "load)", 'load or mean-gap, or surface.periodic = false'))
+        if values["kind"] != "none" and surface is not None and not surface.periodic \
+                and interaction is not None and interaction.kind != "hard-wall":
+            problems.append(("kind", values["kind"], "solves an adhesive interaction on a free "
+                             "boundary (surface.periodic = false), which petgap cannot: its "
+                             "adhesive solvers need the periodic half-space",
+                             'interaction.kind = "hard-wall", or surface.periodic = true'))
         if values.get("reference") is not None and interaction is not None \
                 and interaction.kind != "exponential":
             problems.append(("reference", values["reference"],
@@ -702,6 +741,15 @@ class SolverSection:
     petsc_options: tuple = key(OptionTable(), (), "extra PETSc options database entries")
     planner: str = key(Choice("estimate", "measure", "patient"), "measure",
                        "FFTW planner effort (plans are cached as wisdom on disk)")
+
+    @staticmethod
+    def _check(values, ctx, problems):
+        surface, control = ctx.get("surface"), ctx.get("control")
+        if surface is not None and not surface.periodic and values["tao_type"] not in \
+                ("pcg", "pcg-pressure") and (control is None or control.kind != "none"):
+            problems.append(("tao_type", values["tao_type"], "needs the half-space's stiffness, "
+                             "which a free boundary (surface.periodic = false) does not have in "
+                             "fast form", '"pcg" or "pcg-pressure"'))
 
     def petsc_args(self):
         """The options as a command-line style list ``["-name", "value", ...]``."""

@@ -9,12 +9,16 @@ Modules
 :mod:`.half_space`
     :class:`ElasticHalfSpace`: the periodic half-space, ``p_q = E* |q| u_q / 2``,
     its inverse and elastic energy (paper Eq. 4).
+:mod:`.free_half_space`
+    :class:`FreeHalfSpace`: the same body without periodic images, for a finite
+    map or an indenter (Love's pixel influence coefficients, Hockney's zero padding).
 :mod:`.interactions`
     :class:`HardWall` and :class:`ExponentialAdhesion` (``v(g) = -w exp(-g /
     rho)``, paper Eq. 6), and whether a grid resolves an interaction
     (:func:`resolution_report`, :func:`check_resolution`).
 :mod:`.problem`
-    The controls :class:`Load` (mean pressure) and :class:`MeanGap`,
+    The controls :class:`Load` (mean pressure), :class:`MeanGap` and
+    :class:`Indentation` (free boundary),
     :class:`ContactProblem` (topography, half-space, interaction; the
     formulation and its KKT conditions) and :class:`ContactSolution` (fields,
     scalars and the solver's status).
@@ -23,8 +27,9 @@ from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.interactions import (ExponentialAdhesion, HardWall, ResolutionError,
                                            ResolutionWarning, check_resolution,
                                            resolution_report)
-from petgap.mechanics.problem import ContactProblem, ContactSolution, Load, MeanGap
+from petgap.mechanics.free_half_space import FreeHalfSpace
+from petgap.mechanics.problem import ContactProblem, ContactSolution, Indentation, Load, MeanGap
 
-__all__ = ["ElasticHalfSpace", "HardWall", "ExponentialAdhesion", "ResolutionError",
+__all__ = ["ElasticHalfSpace", "FreeHalfSpace", "Indentation", "HardWall", "ExponentialAdhesion", "ResolutionError",
            "ResolutionWarning", "check_resolution", "resolution_report", "Load", "MeanGap",
            "ContactProblem", "ContactSolution"]

@@ -45,6 +45,10 @@ class ElasticHalfSpace:
         ``E*`` (paper Eq. 4), positive.
     """
 
+    #: Periodic images load the cell (:class:`petgap.mechanics.free_half_space.FreeHalfSpace`
+    #: is the body without them).
+    periodic = True
+
     def __init__(self, grid, contact_modulus=1.0):
         contact_modulus = float(contact_modulus)
         if not (np.isfinite(contact_modulus) and contact_modulus > 0):
@@ -57,6 +61,10 @@ class ElasticHalfSpace:
         self._compliance = 2.0 / (contact_modulus * n)
         self._point_stiffness = None  # computed on first use (collective)
         self._applications = 0
+
+    def on_grid(self, grid):
+        """The same body on another grid (a coarse start's)."""
+        return ElasticHalfSpace(grid, self.contact_modulus)
 
     @property
     def applications(self):

@@ -1,4 +1,4 @@
-"""The contact problem: a rigid rough surface against a periodic elastic half-space.
+"""The contact problem: a rigid rough surface against an elastic half-space.
 
 Formulation (docs/conventions.md)
 ---------------------------------
@@ -16,6 +16,11 @@ mean pressure.  Energies are per cell (``dx dy`` weights).
   Its gradient, divided by the pixel area, is ``p_el + P0 + v'(g) = p + v'(g)``.
 * Mean-gap control: minimise ``E_el + E_int`` over ``g >= 0`` with
   ``mean(g) = g_bar``; ``P0`` is the Lagrange multiplier.
+
+On a free boundary (:mod:`petgap.mechanics.free_half_space`) ``u = C p`` has a
+mean of its own, ``d`` is the counter-surface's position (:class:`Indentation`
+prescribes it) and ``p`` is the whole pressure; only the pressure formulation
+is solved there (:mod:`petgap.solvers.pressure_cg`).
 
 KKT conditions: ``p + v'(g) = 0`` where ``g > 0`` and ``p + v'(0) >= 0`` where
 ``g = 0`` (repulsive contact).  A solution is judged by two unit-free residuals
@@ -55,6 +60,26 @@ class MeanGap:
     @property
     def value(self):
         return self.mean_gap
+
+
+@dataclass(frozen=True)
+class Indentation:
+    """Displacement control: the rigid body pressed ``depth`` past first contact.
+
+    The counter-surface sits at ``d = max(h) - depth`` (``g = d + u - h``): at
+    ``depth = 0`` it touches the highest point; Hertz's sphere has
+    ``depth = a^2 / R``.  For a free boundary only
+    (:class:`petgap.mechanics.free_half_space.FreeHalfSpace`): the periodic
+    half-space has no stiffness for the mean, so a prescribed approach fixes
+    no load.
+    """
+
+    depth: float
+    kind = "indentation"
+
+    @property
+    def value(self):
+        return self.depth
 
 
 @dataclass
@@ -162,6 +187,9 @@ class ContactProblem:
         # unit-free residual scales.
         stats = statistics(grid, self.topography)
         self.mean_height = stats.mean
+        #: The highest point, ``max(h)``: where an indentation is counted from.
+        self.top_height = grid.comm.allreduce(float(np.max(self.topography, initial=-np.inf)),
+                                              op=MPI.MAX)
         self.rms_height = stats.rms_height
         self.rms_slope = stats.rms_slope
         if not (self.rms_height > 0 and self.rms_slope > 0):
@@ -306,8 +334,11 @@ class ContactProblem:
         # with F_att = -sum dx dy v'(g) (< 0, attractive) and F_rep the wall reaction.
         repulsive_force, attractive_force = area * total[4], -area * total[5]
         a_rep = c * grid.area
-        np.add(gap, self.topography, out=grid.real)  # u up to a constant: energy ignores it
-        elastic = self.half_space.energy(grid.real)
+        if self.half_space.periodic:
+            np.add(gap, self.topography, out=grid.real)  # u up to a constant: energy ignores it
+            elastic = self.half_space.energy(grid.real)
+        else:  # the mean of u counts on a free boundary, and only C is at hand
+            elastic = self.half_space.complementary_energy(pressure)
         kappa = a_rep * self.pressure_scale / repulsive_force if (repulsive_force > 0 and a_rep > 0) \
             else float("nan")
         # undefined (NaN, as kappa_rep) when attraction acts without repulsive contact

@@ -1,4 +1,5 @@
-"""Collective helpers: one rank decides and every rank acts on the verdict; global sums.
+"""Collective helpers: one rank decides and every rank acts on the verdict; global sums;
+rows moved between two slab decompositions.
 
 Checks that touch the file system (does the file exist? is it a petgap file?)
 must give the same answer on every rank, or one rank raises while the others
@@ -66,3 +67,36 @@ def global_sums(comm, *values, dtype=np.float64):
     buf = np.array(values[0] if single_array else values, dtype=dtype)
     comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
     return buf
+
+
+def move_rows(comm, block, first, lo, hi):
+    """Give each rank the rows it wants of those held here, in one ``Alltoallv``.
+
+    ``block`` holds global rows ``first, first + 1, ...``; this rank wants rows
+    ``lo <= row < hi`` from whoever holds them.  Returns ``(first row, rows)``
+    for every non-empty piece received, in rank order; pieces overlap where
+    two ranks hold parts of the same row (partial sums).
+    """
+    block = np.ascontiguousarray(block, dtype=float)
+    k, width = block.shape
+    held = comm.allgather((first, first + k))
+    wanted = comm.allgather((lo, hi))
+    send_counts, send_offsets = [], []
+    for a, b in wanted:
+        start, stop = max(a, first), min(b, first + k)
+        rows = max(stop - start, 0)
+        send_counts.append(rows * width)
+        send_offsets.append((start - first) * width if rows else 0)
+    recv_counts, recv_offsets, pieces, total = [], [], [], 0
+    for a, b in held:
+        start, stop = max(a, lo), min(b, hi)
+        rows = max(stop - start, 0)
+        recv_counts.append(rows * width)
+        recv_offsets.append(total)
+        pieces.append((start, rows))
+        total += rows * width
+    received = np.empty(total)
+    comm.Alltoallv([block, (send_counts, send_offsets), MPI.DOUBLE],
+                   [received, (recv_counts, recv_offsets), MPI.DOUBLE])
+    return [(start, received[offset:offset + rows * width].reshape(rows, width))
+            for (start, rows), offset in zip(pieces, recv_offsets) if rows]

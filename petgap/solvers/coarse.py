@@ -26,17 +26,16 @@ Conventions
   divisible by ``f``, the coarse sides at least :data:`MIN_SIDE`), never on
   the number of ranks, so that results do not depend on it beyond round-off.
   Blocks of rows may straddle two ranks' slabs: rows are moved between the
-  two decompositions with one ``Alltoallv`` each way (:func:`_move_rows`).
+  two decompositions with one ``Alltoallv`` each way (:func:`petgap.parallel.collective.move_rows`).
 * The coarse solve is a start, not a result: its tolerance is
   ``max(tolerance, COARSE_TOLERANCE)`` and a coarse solve that did not
   converge still gives its pressure (a NaN gives none: the caller then starts
   from the uniform pressure).
 """
 import numpy as np
-from mpi4py import MPI
 
 from petgap.mechanics.problem import ContactProblem
-from petgap.mechanics.half_space import ElasticHalfSpace
+from petgap.parallel.collective import move_rows
 from petgap.parallel.log import get_logger
 from petgap.parallel.grid import DecompositionError, Grid
 
@@ -86,7 +85,7 @@ def _make_coarse_problem(problem):
                               cgrid.nx, cgrid.ny, cgrid.planning_time, cgrid.planner,
                               ", wisdom cached" if cgrid.wisdom else "")
     h = restrict(grid, cgrid, problem.topography, f)
-    return ContactProblem(cgrid, h, ElasticHalfSpace(cgrid, problem.half_space.contact_modulus),
+    return ContactProblem(cgrid, h, problem.half_space.on_grid(cgrid),
                           problem.interaction)
 
 
@@ -100,7 +99,7 @@ def restrict(grid, coarse, field, f):
     partial = np.add.reduceat(columns, starts, axis=0)  # coarse rows first..last, in part
     lo, hi = coarse.x_slice.start, coarse.x_slice.stop
     out = np.zeros(coarse.local_shape)
-    for row, piece in _move_rows(grid.comm, partial, first, lo, hi):
+    for row, piece in move_rows(grid.comm, partial, first, lo, hi):
         out[row - lo:row - lo + len(piece)] += piece  # a straddling block: two parts
     out /= f * f
     return out
@@ -112,39 +111,6 @@ def prolong(coarse, grid, field, f):
     x0 = grid.x_slice.start
     lo, hi = x0 // f, (x0 + m - 1) // f + 1
     rows = np.empty((hi - lo, field.shape[1]))
-    for row, piece in _move_rows(grid.comm, field, coarse.x_slice.start, lo, hi):
+    for row, piece in move_rows(grid.comm, field, coarse.x_slice.start, lo, hi):
         rows[row - lo:row - lo + len(piece)] = piece
     return np.repeat(rows[np.arange(x0, x0 + m) // f - lo], f, axis=1)
-
-
-def _move_rows(comm, block, first, lo, hi):
-    """Give each rank the rows it wants of those held here, in one ``Alltoallv``.
-
-    ``block`` holds global rows ``first, first + 1, ...``; this rank wants rows
-    ``lo <= row < hi`` from whoever holds them.  Returns ``(first row, rows)``
-    for every non-empty piece received, in rank order; pieces overlap where
-    two ranks hold parts of the same row (partial sums).
-    """
-    block = np.ascontiguousarray(block, dtype=float)
-    k, width = block.shape
-    held = comm.allgather((first, first + k))
-    wanted = comm.allgather((lo, hi))
-    send_counts, send_offsets = [], []
-    for a, b in wanted:
-        start, stop = max(a, first), min(b, first + k)
-        rows = max(stop - start, 0)
-        send_counts.append(rows * width)
-        send_offsets.append((start - first) * width if rows else 0)
-    recv_counts, recv_offsets, pieces, total = [], [], [], 0
-    for a, b in held:
-        start, stop = max(a, lo), min(b, hi)
-        rows = max(stop - start, 0)
-        recv_counts.append(rows * width)
-        recv_offsets.append(total)
-        pieces.append((start, rows))
-        total += rows * width
-    received = np.empty(total)
-    comm.Alltoallv([block, (send_counts, send_offsets), MPI.DOUBLE],
-                   [received, (recv_counts, recv_offsets), MPI.DOUBLE])
-    return [(start, received[offset:offset + rows * width].reshape(rows, width))
-            for (start, rows), offset in zip(pieces, recv_offsets) if rows]

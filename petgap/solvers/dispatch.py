@@ -28,6 +28,11 @@ Solver types
     pressure ``P0`` is adjusted by a secant iteration on ``log(P0 / h0' E*)``
     around inexact inner solves until the mean gap matches.
 
+On a free boundary (:class:`petgap.mechanics.free_half_space.FreeHalfSpace`) only
+``pcg-pressure`` runs, for the hard wall: under load, under
+:class:`~petgap.mechanics.problem.Indentation`, and under a mean gap through the
+indentation (:func:`petgap.solvers.pressure_cg.solve_mean_gap_by_indentation`).
+
 Every type stops on the same unit-free KKT test (largest pressure violation
 over ``h0' E*`` and gap violation over ``h0`` below ``tolerance``), never on
 TAO's unit-dependent gradient norms, and reports ``converged=False`` with
@@ -36,8 +41,9 @@ TAO's reason when it stops for any other cause.
 
 from petsc4py import PETSc
 
-from petgap.mechanics.problem import Load, MeanGap
-from petgap.solvers.pressure_cg import full_contact_state, touching_state
+from petgap.mechanics.problem import Indentation, Load, MeanGap
+from petgap.solvers.pressure_cg import (full_contact_state, solve_mean_gap_by_indentation,
+                                        touching_state)
 from petgap.solvers.tao import (PETGAP_TYPES, petsc_options, solve_load_by_mean_gap,
                                 solve_mean_gap_by_multiplier, tao_solve)
 
@@ -84,10 +90,22 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
     if tao_type not in SOLVER_TYPES:
         raise ValueError(f"-tao_type {tao_type} is not supported; use one of {', '.join(SOLVER_TYPES)}")
     adhesive = problem.interaction.adhesive
+    periodic = problem.half_space.periodic
+    if not periodic:
+        _check_free_boundary(adhesive, tao_type)
+    elif isinstance(control, Indentation):
+        raise ValueError("indentation control needs a free boundary (surface.periodic = "
+                         "false): on a periodic cell an approach fixes no load; use load or "
+                         "mean-gap control")
     if isinstance(control, Load) and not adhesive and control.mean_pressure == 0:
         return touching_state(problem, control)  # nothing to solve, for any solver
+    if not periodic and isinstance(control, MeanGap):
+        with petsc_options(options):
+            return solve_mean_gap_by_indentation(
+                problem, control, tolerance=tolerance, max_iterations=max_iterations,
+                initial_pressure=None if initial is None else initial.pressure, monitor=monitor)
     checked = 0
-    if isinstance(control, Load) and not adhesive:
+    if isinstance(control, Load) and not adhesive and periodic:
         before = problem.operator_applications
         full = full_contact_state(problem, control)   # likewise, at the other end
         if full is not None:
@@ -100,10 +118,23 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
     return solution
 
 
+def _check_free_boundary(adhesive, tao_type):
+    """Refuse what the free boundary cannot do: its stiffness has no fast form."""
+    if adhesive:
+        raise ValueError("adhesion on a free boundary is not available: the adhesive "
+                         "solvers work on the gap and need the half-space's stiffness, which "
+                         "only the periodic half-space has in fast form; solve it periodic "
+                         "(surface.periodic = true)")
+    if tao_type not in ("pcg", "pcg-pressure"):
+        raise ValueError(f"solver {tao_type!r} needs the half-space's stiffness, which a free "
+                         f"boundary does not have in fast form; use pcg or pcg-pressure")
+
+
 def _solve(problem, control, tao_type, adhesive, tolerance, max_iterations, initial, options,
            monitor):
     if tao_type == "pcg":
-        tao_type = "pcg-pressure" if (isinstance(control, Load) and not adhesive) else "pcg-gap"
+        tao_type = ("pcg-pressure" if isinstance(control, (Load, Indentation)) and not adhesive
+                    else "pcg-gap")
     if tao_type == "pcg-pressure" and adhesive:
         raise ValueError("solver 'pcg-pressure' (Polonsky-Keer on the pressure) is for "
                          "non-adhesive contact; use pcg or pcg-gap for adhesion")

@@ -65,7 +65,7 @@ zero by construction: ``p >= 0`` and ``p = 0`` off ``S``).
 import numpy as np
 from mpi4py import MPI
 
-from petgap.mechanics.problem import Load, MeanGap
+from petgap.mechanics.problem import Indentation, Load, MeanGap
 from petgap.parallel.collective import global_sums
 from petgap.parallel.log import GAP_PASS_EVENT, SET_UPDATE_EVENT, event
 from petgap.solvers import _contact_set as _cs
@@ -112,6 +112,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     n = grid.npoints
     n_local, ny = h.size, grid.ny
     load = isinstance(control, Load)
+    periodic = problem.half_space.periodic
     if load:
         target = float(control.mean_pressure)
         if target == 0:
@@ -120,9 +121,22 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             raise ValueError(f"mean pressure {target} < 0: a non-adhesive interface cannot "
                              f"carry a tensile load; use a positive load or an adhesive interaction")
     elif isinstance(control, MeanGap):
+        if not periodic:
+            raise ValueError("on a free boundary the mean gap is reached through the "
+                             "indentation (solve_mean_gap_by_indentation)")
         target = float(control.mean_gap)
         if not target >= 0:
             raise ValueError(f"mean gap {target} < 0 is impossible with a hard wall (gap >= 0)")
+    elif isinstance(control, Indentation):
+        if periodic:
+            raise ValueError("indentation control needs a free boundary: the periodic "
+                             "half-space has no stiffness for the mean, so an approach "
+                             "fixes no load; use load or mean-gap control")
+        target = float(control.depth)
+        if not target >= 0:
+            raise ValueError(f"indentation depth {target} < 0: the surfaces do not touch")
+        if target == 0:
+            return touching_state(problem, control, timer)
     else:
         raise TypeError(f"unknown control {control!r}")
 
@@ -139,12 +153,15 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     mask = np.zeros(grid.local_shape, dtype=np.uint8)
     padded = grid.padded
     padded_width = padded.shape[1]
-    offset = problem.mean_height + target if not load else 0.0
+    # g = u - h + offset; periodic u has zero mean, so a mean gap fixes the offset
+    offset = (0.0 if load else problem.mean_height + target if periodic
+              else problem.top_height - target)
     if initial_pressure is not None or not load:
         if initial_pressure is not None:
             p = np.asarray(initial_pressure, dtype=float)
         else:
-            # Mean-gap control: pressure where the undeformed surfaces overlap.
+            # Mean-gap or indentation control: pressure where the undeformed
+            # surfaces overlap.
             p = (h - offset) * (problem.pressure_scale / problem.gap_scale)
         # S = {p > 0}, with p there: the negative part is dropped on the way in
         # (no pass of its own), and p is rescaled to the load on S alone.
@@ -178,6 +195,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     history = []
     converged, reason, it = False, "max_iterations", 0
     first = 0
+    if contact is None and not periodic:
+        contact = ContactSet.everywhere(mask, padded_width, target)  # C P0 is not zero
     if contact is None:
         # Its first iteration in closed form (one transform instead of three,
         # and no set of every point); the uniform set itself only where that
@@ -423,6 +442,71 @@ def full_contact_state(problem, control, timer=None):
                                  converged=True, reason="full_contact", solver="pcg-pressure",
                                  iterations=0, operator_applications=1,
                                  wall_time=timer() if timer is not None else 0.0)
+
+
+def solve_mean_gap_by_indentation(problem, control, *, tolerance=1e-8, max_iterations=10000,
+                                  initial_pressure=None, monitor=None, max_solves=50):
+    """Mean-gap control on a free boundary: the indentation whose solution has the mean gap.
+
+    On a free boundary the displacement has a mean of its own, so a mean gap
+    fixes no offset (as it does on a periodic cell); it is found instead as the
+    depth ``d`` of an :class:`~petgap.mechanics.problem.Indentation` solve.  The
+    mean gap ``m(d) = mean(u) - mean(h) + max(h) - d`` falls with ``d`` at a slope
+    between -1 (rigid) and 0, and is convex where the load grows faster than
+    the depth (Hertz: ``d^{3/2}``): from the rigid estimate ``u = 0``, which lies
+    below the answer since ``u >= 0`` under compression, secant steps through
+    the last two solves (the first with slope -1) stay below it and converge
+    from one side, each solve warm-started from the last.  Stops when
+    ``|m - g_bar| <= tolerance h0``; a solve that fails, or ``max_solves``
+    steps, ends it with ``converged=False`` and that reason.
+
+    Returns the last solve's solution with ``control`` set to the mean gap and
+    iterations, operator applications and history summed over the solves.
+    """
+    g_bar = float(control.mean_gap)
+    if not g_bar >= 0:
+        raise ValueError(f"mean gap {g_bar} < 0 is impossible with a hard wall (gap >= 0)")
+    timer = Timer()
+    reach = problem.top_height - problem.mean_height   # mean gap at first touch
+    if g_bar >= reach:   # apart: the rigid surface lifted off the touching state
+        state = touching_state(problem, control, timer)
+        state.gap += g_bar - reach
+        state.mean_gap = g_bar
+        return state
+    start_ops = problem.operator_applications
+    depth, previous = reach - g_bar, None
+    iterations, history, pressure, solves = 0, [], initial_pressure, 0
+    converged, reason = False, "max_solves"
+    while solves < max_solves:
+        solution = polonsky_keer(problem, Indentation(depth), tolerance=tolerance,
+                                 max_iterations=max(max_iterations - iterations, 1),
+                                 initial_pressure=pressure, monitor=monitor,
+                                 coarse_start=pressure is None)
+        solves += 1
+        iterations += solution.iterations
+        history.extend(solution.history)
+        excess = solution.mean_gap - g_bar
+        if not solution.converged:
+            reason = solution.reason
+            break
+        if abs(excess) <= tolerance * problem.gap_scale:
+            converged, reason = True, "converged_kkt"
+            break
+        slope = -1.0
+        if previous is not None and depth != previous[0]:
+            slope = min((solution.mean_gap - previous[1]) / (depth - previous[0]), -1e-12)
+        previous = (depth, solution.mean_gap)
+        depth += excess / -slope
+        pressure = solution.pressure
+    solution.start = "; ".join(filter(None, [f"{solves} indentation solves to the mean gap, "
+                                             f"last depth {solution.control.depth:.6g}",
+                                             solution.start]))
+    solution.control = control
+    solution.converged, solution.reason = converged, reason
+    solution.iterations, solution.history = iterations, history
+    solution.operator_applications = problem.operator_applications - start_ops
+    solution.wall_time = timer()
+    return solution
 
 
 def touching_state(problem, control, timer=None):

@@ -180,8 +180,9 @@ def _condition(path, topography, reader, channel, unit, detrend, undefined, size
 def read_header(path, channel=None, unit=None):
     """Shape, physical size and unit of a measured map, without its heights (calling rank).
 
-    ``{"shape": (nx, ny), "size": (Lx, Ly) or None, "unit": str or None}``; the size is
-    converted to ``unit`` when the file and ``unit`` both name one.
+    ``{"shape": (nx, ny), "size": (Lx, Ly) or None, "unit": str or None, "periodic":
+    bool}``; the size is converted to ``unit`` when the file and ``unit`` both name one;
+    ``periodic`` is the file's own say (instrument maps are not, as a rule).
     """
     _, chosen = _open_channel(path, channel)
     size, file_unit = chosen.physical_sizes, chosen.unit
@@ -194,7 +195,8 @@ def read_header(path, channel=None, unit=None):
                              f"{unit!r}: {exc}") from None
         size, file_unit = tuple(factor * float(v) for v in size), unit
     return {"shape": tuple(int(n) for n in chosen.nb_grid_pts),
-            "size": None if size is None else tuple(float(v) for v in size), "unit": file_unit}
+            "size": None if size is None else tuple(float(v) for v in size), "unit": file_unit,
+            "periodic": bool(getattr(chosen, "is_periodic", False))}
 
 
 def scatter_rows(grid, heights):

@@ -11,6 +11,7 @@ an allreduce over the slabs, for non-finite values) and raised as the same
 exception on every rank, so no rank is left waiting in a collective call.
 """
 import io
+import json
 import os
 from pathlib import Path
 
@@ -113,9 +114,10 @@ def load_topography(grid, path, dataset=None, *, channel=None, unit=None, detren
 
 def map_header(path, dataset=None, channel=None, length_unit="1"):
     """What a topography file says about its grid, read on the calling rank without its
-    heights: ``{"shape": (nx, ny), "size": (Lx, Ly) or None, "unit": ...}``.
+    heights: ``{"shape": (nx, ny), "size": (Lx, Ly) or None, "unit": ..., "periodic": bool}``.
 
-    ``.npy`` and HDF5 maps know only their shape; instrument files (via
+    ``.npy`` maps know only their shape (not periodic: nothing says so); HDF5 maps also
+    whether they are periodic (:func:`_says_periodic`); instrument files (via
     :func:`petgap.surfaces.measured.read_header`) also their physical size, converted to
     ``length_unit`` unless that is ``"1"`` (the scene's own unit).  The reader the scene
     parser uses to take the grid from the file (``Scene.from_file(..., read_header=)``).
@@ -124,12 +126,30 @@ def map_header(path, dataset=None, channel=None, length_unit="1"):
     if path.suffix.lower() not in SUFFIXES:
         return read_header(path, channel, None if length_unit == "1" else length_unit)
     kind, name = _inspect(path, dataset, None)
+    periodic = False
     if kind == "npy":
         shape = np.load(path, mmap_mode="r").shape
     else:
         with _import_h5py().File(path, "r") as f:
             shape = f[name].shape
-    return {"shape": tuple(int(n) for n in shape), "size": None, "unit": None}
+            periodic = _says_periodic(f, name)
+    return {"shape": tuple(int(n) for n in shape), "size": None, "unit": None,
+            "periodic": periodic}
+
+
+def _says_periodic(f, name):
+    """Whether an HDF5 file says its map is periodic: a ``periodic`` attribute of the
+    dataset, or, in a petgap result, the surface.periodic of the scene that made it."""
+    if "periodic" in f[name].attrs:
+        return bool(f[name].attrs["periodic"])
+    scene = f.attrs.get("scene_resolved")
+    if scene is None:
+        return False
+    try:
+        surface = json.loads(scene).get("surface", {})
+    except (TypeError, ValueError):
+        return False
+    return bool(surface.get("periodic", surface.get("kind") == "self-affine"))
 
 
 def read_map(path, dataset=None, *, channel=None, unit=None, detrend="none",

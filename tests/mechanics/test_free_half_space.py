@@ -1,0 +1,181 @@
+"""The free-boundary half-space: Love's coefficients, Hockney's padding, and the classical
+contacts it must reproduce (Hertz, the flat punch), against the periodic cell."""
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+import petgap
+from petgap.mechanics.free_half_space import FreeHalfSpace, influence_coefficients
+from petgap.parallel.grid import Grid
+from petgap.surfaces.indenters import indenter
+
+
+def _gather(comm, local):
+    return np.concatenate(comm.allgather(local))
+
+
+def test_influence_coefficients_limits():
+    """The pixel's own centre in closed form; far away, the point load dx dy / (pi E* r)."""
+    dx, dy, e = 0.7, 1.3, 2.5
+    centre = influence_coefficients(0.0, 0.0, dx, dy, e)
+    expected = 2 / (np.pi * e) * (dx * np.arcsinh(dy / dx) + dy * np.arcsinh(dx / dy))
+    assert centre == pytest.approx(expected, rel=1e-14)
+    r = np.array([50.0, 200.0, 800.0])
+    far = influence_coefficients(r * 0.6, r * 0.8, dx, dy, e)
+    point = dx * dy / (np.pi * e * r)
+    # the pixel's second moment corrects the point load by O((dx / r)^2)
+    assert np.all(np.abs(far / point - 1) < 0.2 * (max(dx, dy) / r) ** 2)
+    # the integral over the pixel: mean of 1/r by a fine midpoint rule, at a near point
+    s = (np.arange(400) + 0.5) / 400 - 0.5
+    xs, ys = np.meshgrid(s * dx, s * dy, indexing="ij")
+    near = np.mean(1 / np.hypot(2.0 - xs, 1.0 - ys)) * dx * dy / (np.pi * e)
+    assert influence_coefficients(2.0, 1.0, dx, dy, e) == pytest.approx(near, rel=1e-5)
+
+
+@pytest.mark.parametrize("shape", [(12, 10), (9, 7)])
+def test_compliance_is_the_linear_convolution(comm, shape):
+    """Hockney's padded transform equals the direct sum over the map, on any rank count."""
+    nx, ny = shape
+    grid = Grid(shape, size=(nx * 0.7, ny * 1.3), comm=comm, planner="estimate", wisdom=False)
+    half_space = FreeHalfSpace(grid, 2.0)
+    p = np.random.default_rng(1).random(shape)      # the same on every rank
+    u = _gather(comm, half_space.displacement(p[grid.x_slice]))
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    direct = np.array([[np.sum(influence_coefficients((a - i) * grid.dx, (b - j) * grid.dy,
+                                                      grid.dx, grid.dy, 2.0) * p)
+                        for b in range(ny)] for a in range(nx)])
+    np.testing.assert_allclose(u, direct, rtol=1e-13, atol=1e-13 * np.abs(direct).max())
+    # the sparse path of the solvers gives the same, gathered on the points
+    pidx = np.flatnonzero(np.ones(grid.padded.shape, bool)[:, :].reshape(-1) &
+                          (np.arange(grid.padded.size) % grid.padded.shape[1] < ny))
+    values = p[grid.x_slice].ravel()
+    gathered = np.empty(len(pidx))
+    half_space.apply_sparse(pidx, values, inverse=True, gathered=gathered)
+    np.testing.assert_allclose(gathered, direct[grid.x_slice].ravel(), rtol=1e-12,
+                               atol=1e-13 * np.abs(direct).max())
+    # the complementary energy is (1/2) p.u dx dy, and positive (C is positive definite)
+    energy = half_space.complementary_energy(p[grid.x_slice])
+    assert energy == pytest.approx(0.5 * grid.pixel_area * np.sum(p * direct), rel=1e-12)
+    with pytest.raises(NotImplementedError, match="displacements from pressures only"):
+        half_space.pressure(u[grid.x_slice])
+
+
+def _hertz(comm, n=256, a=64.0, radius=1000.0):
+    grid = Grid((n, n), comm=comm, planner="estimate", wisdom=False)
+    h = indenter(grid, "paraboloid", radius)
+    return grid, petgap.ContactProblem(grid, h, FreeHalfSpace(grid, 1.0))
+
+
+def test_hertz_on_a_free_boundary(comm):
+    """64 pixels per contact radius on a map just four radii wide: no periodic correction.
+
+    Load control at Hertz's load ``P = 4 E* a^3 / 3R``: contact radius (from the
+    area) and peak pressure ``2 E* a / (pi R)`` within 0.5 %; indentation
+    control at Hertz's ``d = a^2 / R``: the load within 0.5 %.
+    """
+    a, radius = 64.0, 1000.0
+    grid, problem = _hertz(comm, a=a, radius=radius)
+    load = 4 * a ** 3 / (3 * radius)
+    s = petgap.solve(problem, petgap.Load(load / grid.area))
+    assert s.converged and s.reason == "converged_kkt"
+    assert np.sqrt(s.contact_fraction * grid.area / np.pi) == pytest.approx(a, rel=5e-3)
+    p0 = comm.allreduce(float(s.pressure.max()), op=MPI.MAX)
+    assert p0 == pytest.approx(2 * a / (np.pi * radius), rel=5e-3)
+    # the pressure is Hertz's ellipse inside, away from the edge
+    x, y = grid.local_positions()
+    r = np.hypot(x - grid.nx // 2, y - grid.ny // 2)
+    inner = r < 0.9 * a
+    hertz = 2 * a / (np.pi * radius) * np.sqrt(np.maximum(1 - (r / a) ** 2, 0))
+    assert np.all(np.abs(s.pressure[inner] - hertz[inner]) < 0.01 * p0)
+
+    d = petgap.solve(problem, petgap.Indentation(a ** 2 / radius))
+    assert d.converged
+    assert d.mean_pressure * grid.area == pytest.approx(load, rel=5e-3)
+    assert d.control.kind == "indentation" and d.control.value == a ** 2 / radius
+    # the elastic energy of Hertz's contact: (2/5) P d
+    assert d.elastic_energy == pytest.approx(0.4 * load * a ** 2 / radius, rel=1e-2)
+
+
+def test_mean_gap_on_a_free_boundary_is_reached_through_the_indentation(comm):
+    grid, problem = _hertz(comm, n=128, a=32.0)
+    by_depth = petgap.solve(problem, petgap.Indentation(1.0))
+    s = petgap.solve(problem, petgap.MeanGap(by_depth.mean_gap))
+    assert s.converged and s.control.kind == "mean-gap"
+    assert s.mean_gap == pytest.approx(by_depth.mean_gap, rel=1e-8)
+    assert s.mean_pressure == pytest.approx(by_depth.mean_pressure, rel=1e-5)
+    assert "indentation solves to the mean gap" in s.start
+    # beyond first touch the surfaces stay apart, unloaded
+    apart = petgap.solve(problem, petgap.MeanGap(10 * by_depth.mean_gap))
+    assert apart.mean_pressure == 0 and apart.mean_gap == pytest.approx(10 * by_depth.mean_gap)
+
+
+def test_flat_punch_stiffness(comm):
+    """Boussinesq's rigid circular punch: ``P = 2 E* a d``, within 1 % at 64 pixels per radius."""
+    n, a = 256, 64.0
+    grid = Grid((n, n), comm=comm, planner="estimate", wisdom=False)
+    problem = petgap.ContactProblem(grid, indenter(grid, "flat-punch", a), FreeHalfSpace(grid))
+    s = petgap.solve(problem, petgap.Indentation(0.5))
+    assert s.converged
+    assert s.mean_pressure * grid.area == pytest.approx(2 * a * 0.5, rel=1e-2)
+    # the whole face is in contact, nothing around it
+    face = comm.allreduce(int(np.count_nonzero(problem.topography == 0)))
+    assert s.contact_fraction * grid.npoints == face
+
+
+def test_free_and_periodic_differ_by_the_images(comm):
+    """A small Hertz contact at the centre of a periodic cell and of a free map.
+
+    The free solution does not see the map's size (no pressure outside the
+    contact); the periodic one feels its images, whose field at the contact
+    falls as ``(a / L)^3``.  The two discretisations (pixel-uniform pressure
+    here, the spectral symbol there) differ by a constant of order
+    ``(a0 / a)^2`` besides, so the difference in peak pressure is
+    ``D(L) = D_inf + c (a / L)^3``, and each doubling of the cell divides
+    ``D(L) - D(2L)`` by eight.
+    """
+    a, radius = 24.0, 2000.0
+    load = 4 * a ** 3 / (3 * radius)
+    peaks = {}
+    sizes = (192, 384, 768)
+    for n in sizes:
+        grid = Grid((n, n), comm=comm, planner="estimate", wisdom=False)
+        h = indenter(grid, "paraboloid", radius)
+        for name, body in (("free", FreeHalfSpace(grid)), ("periodic",
+                                                           petgap.ElasticHalfSpace(grid))):
+            s = petgap.solve(petgap.ContactProblem(grid, h, body), petgap.Load(load / grid.area))
+            assert s.converged
+            peaks[name, n] = comm.allreduce(float(s.pressure.max()), op=MPI.MAX)
+    assert peaks["free", 192] == pytest.approx(peaks["free", 768], rel=1e-6)
+    d = [peaks["periodic", n] / peaks["free", n] - 1 for n in sizes]
+    assert 1e-4 < abs(d[0]) < 1e-2
+    assert 7 < (d[0] - d[1]) / (d[1] - d[2]) < 9
+
+
+def test_free_boundary_is_rank_independent(comm):
+    """The same indentation on ``comm`` and on every rank alone agree to round-off."""
+    def solve(c):
+        grid = Grid((96, 80), size=(96 * 0.5, 80 * 0.5), comm=c, planner="estimate",
+                    wisdom=False)
+        problem = petgap.ContactProblem(grid, indenter(grid, "sphere", 30.0),
+                                        FreeHalfSpace(grid))
+        s = petgap.solve(problem, petgap.Load(0.002))
+        return grid, s
+    grid, together = solve(comm)
+    _, alone = solve(MPI.COMM_SELF)
+    assert together.iterations == alone.iterations
+    np.testing.assert_allclose(together.pressure, alone.pressure[grid.x_slice], rtol=0,
+                               atol=1e-12 * np.abs(alone.pressure).max())
+
+
+def test_what_a_free_boundary_cannot_do(comm):
+    grid, problem = _hertz(comm, n=64, a=16.0)
+    adhesive = problem.with_interaction(petgap.ExponentialAdhesion(1e-3, 1.0))
+    with pytest.raises(ValueError, match="adhesion on a free boundary is not available"):
+        petgap.solve(adhesive, petgap.Load(1e-4))
+    with pytest.raises(ValueError, match="needs the half-space's stiffness"):
+        petgap.solve(problem, petgap.Load(1e-4), solver="bncg")
+    periodic = petgap.ContactProblem(grid, problem.topography, petgap.ElasticHalfSpace(grid))
+    with pytest.raises(ValueError, match="indentation control needs a free boundary"):
+        petgap.solve(periodic, petgap.Indentation(1.0))
+    with pytest.raises(ValueError, match="depth -1.0 < 0"):
+        petgap.solve(problem, petgap.Indentation(-1.0))
