@@ -63,9 +63,9 @@ def seam_warning(stats, path):
             f"{stats.rms_slope:.4g} spectrally and {stats.rms_slope_fd:.4g} by finite "
             f"differences across the edges of the periodic cell, but "
             f"{stats.rms_slope_fd_inner:.4g} inside the map; solved as periodic, the seam "
-            f"is a cliff in the surface (free-boundary contact is not available yet): "
-            f"remove the trend (surface.detrend = \"height\" or \"curvature\") or cut "
-            f"the map so that its edges match")
+            f"is a cliff in the surface: solve it on a free boundary (surface.periodic = "
+            f"false), remove the trend (surface.detrend = \"height\" or \"curvature\") or "
+            f"cut the map so that its edges match")
 
 
 def load_scene(path, comm=None):

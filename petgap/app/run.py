@@ -301,6 +301,9 @@ def _write_step(model, output, step, solution):
                              if step.adhesive else None,
                              "range": interaction.range if step.adhesive else None},
              "contact_modulus": scene.material.contact_modulus,
+             # the h0' of the solve's scales and of the analysis (finite differences inside
+             # the map on a free boundary; see petgap.mechanics.problem.ContactProblem)
+             "rms_slope": model.problem.rms_slope,
              "surface": {"rms_height": stats.rms_height, "rms_slope": stats.rms_slope,
                          "rms_curvature": stats.rms_curvature},
              "pixel_size": [grid.dx, grid.dy]}

@@ -35,7 +35,8 @@ from mpi4py import MPI
 
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.interactions import HardWall
-from petgap.surfaces.statistics import check_local_field, statistics
+from petgap.surfaces.statistics import (check_local_field, finite_difference_slopes,
+                                        statistics)
 
 
 @dataclass(frozen=True)
@@ -191,7 +192,11 @@ class ContactProblem:
         self.top_height = grid.comm.allreduce(float(np.max(self.topography, initial=-np.inf)),
                                               op=MPI.MAX)
         self.rms_height = stats.rms_height
-        self.rms_slope = stats.rms_slope
+        #: ``h0'``: spectral on a periodic cell; on a free boundary by finite differences
+        #: inside the map, since the spectrum of a map whose edges do not match holds the
+        #: seam's cliff (which no free solve sees).
+        self.rms_slope = stats.rms_slope if half_space.periodic else \
+            finite_difference_slopes(grid, self.topography)[1]
         if not (self.rms_height > 0 and self.rms_slope > 0):
             raise ValueError("the topography is flat: contact of a flat surface has no "
                              "rough-contact solution (rms height and slope are zero)")

@@ -137,9 +137,11 @@ class Capture(logging.Handler):
         self.messages.append(record.getMessage())
 
 
-def _built_warnings(comm, path, shape):
-    scene = Scene.from_dict({"grid": {"nx": shape[0], "ny": shape[1]},
-                             "surface": {"kind": "file", "path": str(path)},
+def _built_warnings(comm, path, shape, periodic=True):
+    surface = {"kind": "file", "path": str(path)}
+    if periodic is not None:
+        surface["periodic"] = periodic
+    scene = Scene.from_dict({"grid": {"nx": shape[0], "ny": shape[1]}, "surface": surface,
                              "control": {"kind": "none"}}, comm)
     log = logging.getLogger(f"petgap.test.seam.{Path(path).stem}")
     capture = Capture()
@@ -153,7 +155,9 @@ def _built_warnings(comm, path, shape):
 
 def test_periodicity_warning_fires_on_a_tilted_map_only(comm, mpi_tmp_path):
     """A tilted 96 x 160 map solved as periodic has a cliff at the seam: warned, with the
-    spectral and both finite-difference slopes; a generated periodic surface is not."""
+    spectral and both finite-difference slopes; a generated periodic surface is not, and
+    neither is the tilted map on a free boundary (a .npy map's default: it does not say
+    it is periodic)."""
     grid = Grid((96, 160), comm=comm, planner="estimate", wisdom=False)
     h = self_affine(grid, 0.8, 8.0, rms_slope=0.1, seed=2)
     save_topography_npy(grid, h, mpi_tmp_path / "periodic.npy")
@@ -172,6 +176,8 @@ def test_periodicity_warning_fires_on_a_tilted_map_only(comm, mpi_tmp_path):
     assert "tilted.npy" in message and f"{stats.rms_slope:.4g} spectrally" in message
     assert f"{stats.rms_slope_fd_inner:.4g} inside the map" in message
     assert 'surface.detrend = "height"' in message
+    model, free = _built_warnings(comm, mpi_tmp_path / "tilted.npy", (96, 160), periodic=None)
+    assert model.scene.surface.periodic is False and free == []
 
 
 def test_conditioned_npy_is_scattered_like_the_whole_map(comm, mpi_tmp_path):

@@ -1,0 +1,135 @@
+"""Free boundaries in scenes: indenters, surface.periodic and its defaults, what is refused,
+and a measured map run end to end on a free boundary.
+
+Every test makes all its collective calls before its first assertion.
+"""
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from petgap.app.build import build, load_scene
+from petgap.io import scene as scene_module
+from petgap.io.scene import Scene, SceneError
+from petgap.surfaces import indenters
+from petgap.surfaces.topography import map_header
+
+TOPOGRAPHIES = Path(__file__).resolve().parents[1] / "data" / "topographies"
+
+HERTZ = {"grid": {"nx": 128}, "surface": {"kind": "paraboloid", "radius": 500.0},
+         "control": {"kind": "indentation", "values": [0.5, 2.0]},
+         "solver": {"planner": "estimate"}}
+
+
+def _scene(data, comm):
+    return Scene.from_dict(json.loads(json.dumps(data)), comm)
+
+
+def test_indenter_heights():
+    """Apex at height 0 on the centre pixel, the classical profiles around it."""
+    class G:   # the attributes of a grid indenter() reads
+        nx, ny, dx, dy = 9, 8, 0.5, 2.0
+
+        def local_positions(self):
+            return np.meshgrid(np.arange(9) * 0.5, np.arange(8) * 2.0, indexing="ij")
+    x, y = G().local_positions()
+    x, y = x - 4 * 0.5, y - 4 * 2.0
+    r2 = x ** 2 + y ** 2
+    assert scene_module.INDENTERS == indenters.KINDS
+    np.testing.assert_allclose(indenters.indenter(G(), "paraboloid", 3.0), -r2 / 6.0)
+    np.testing.assert_allclose(indenters.indenter(G(), "cylinder", 3.0), -x ** 2 / 6.0)
+    sphere = indenters.indenter(G(), "sphere", 3.0)
+    np.testing.assert_allclose(sphere[r2 <= 9], np.sqrt(9 - r2[r2 <= 9]) - 3.0)
+    assert np.all(sphere[r2 > 9] == -3.0) and sphere[4, 4] == 0.0
+    punch = indenters.indenter(G(), "flat-punch", 3.0)
+    assert np.all(punch[r2 <= 9] == 0.0) and np.all(punch[r2 > 9] == -3.0)
+    with pytest.raises(ValueError, match="radius must be positive"):
+        indenters.indenter(G(), "sphere", 0.0)
+
+
+def test_periodic_defaults(comm, mpi_tmp_path):
+    """Generated surfaces are periodic, indenters are not, files are what they say."""
+    generated = _scene({"grid": {"nx": 32}, "surface": {"hurst": 0.8, "lambda_min": 8}}, comm)
+    assert generated.surface.periodic is True
+    assert _scene(HERTZ, comm).surface.periodic is False
+    npy, said, unsaid = (mpi_tmp_path / n for n in ("map.npy", "said.h5", "unsaid.h5"))
+    if comm.rank == 0:
+        np.save(npy, np.zeros((8, 6)))
+        with h5py.File(said, "w") as f:
+            f.create_dataset("topography", data=np.zeros((8, 6))).attrs["periodic"] = True
+        with h5py.File(unsaid, "w") as f:
+            f.create_dataset("topography", data=np.zeros((8, 6)))
+            f.attrs["scene_resolved"] = json.dumps({"surface": {"kind": "self-affine"}})
+    comm.Barrier()
+    assert map_header(npy)["periodic"] is False
+    assert map_header(said)["periodic"] is True
+    assert map_header(unsaid)["periodic"] is True      # a petgap result of a generated surface
+    assert map_header(TOPOGRAPHIES / "top-1.top")["periodic"] is False
+    text = '[surface]\nkind = "file"\npath = "{}"\n[control]\nkind = "none"\n'
+    for path, periodic in ((npy, False), (said, True)):
+        (mpi_tmp_path / "s.toml").write_text(text.format(path)) if comm.rank == 0 else None
+        comm.Barrier()
+        assert load_scene(mpi_tmp_path / "s.toml", comm).surface.periodic is periodic
+        comm.Barrier()
+
+
+@pytest.mark.parametrize("change, key, words", [
+    ({"surface": {"kind": "paraboloid", "radius": 500.0, "periodic": True}}, "control.kind",
+     "needs a free boundary"),
+    ({"interaction": {"kind": "exponential", "work_of_adhesion": 1e-3, "range": 1.0}},
+     "control.kind", "adhesive interaction on a free boundary"),
+    ({"solver": {"planner": "estimate", "tao_type": "bncg"}}, "solver.tao_type",
+     "does not have in fast form"),
+    ({"surface": {"kind": "flat-punch"}}, "surface.radius", "missing"),
+    ({"surface": {"kind": "paraboloid", "radius": -1.0}}, "surface.radius", "out of range"),
+])
+def test_what_a_free_boundary_refuses(comm, change, key, words):
+    with pytest.raises(SceneError) as info:
+        _scene({**HERTZ, **change}, comm)
+    assert key in str(info.value) and words in str(info.value)
+
+
+def test_hertz_scene_is_solved_on_a_free_boundary(comm):
+    """An indentation sweep of a paraboloid: Hertz's load P = (4/3) E* sqrt(R) d^(3/2)."""
+    model = build(_scene(HERTZ, comm), comm)
+    states = list(model.sweep())
+    assert not model.half_space.periodic
+    for step, state in zip(model.steps, states):
+        depth = step.control.depth
+        hertz = 4 / 3 * np.sqrt(500.0) * depth ** 1.5
+        assert state.converged
+        assert state.mean_pressure * model.grid.area == pytest.approx(hertz, rel=0.02)
+
+
+def test_measured_map_end_to_end_on_a_free_boundary(comm, mpi_tmp_path, run_cli):
+    """An AFM map (WSxM .top, 256 x 256 pixels over 600 x 600 nm) from scene to report: the
+    grid from the file, solved free (the file does not say it is periodic), with h0' taken
+    inside the map, and post-processed without patches or perimeter across its edges."""
+    scene = mpi_tmp_path / "afm.toml"
+    if comm.rank == 0:
+        scene.write_text(f'[surface]\nkind = "file"\npath = "{TOPOGRAPHIES / "top-1.top"}"\n'
+                         f'detrend = "height"\n[units]\nlength = "nm"\n'
+                         f'[control]\nkind = "load"\nvalues = [0.01]\n'
+                         f'[solver]\nplanner = "estimate"\n')
+    comm.Barrier()
+    out = mpi_tmp_path / "afm.h5"
+    run = run_cli(["petgap", "run", scene, "--output", out], ranks=2)
+    post = run_cli(["petgap-post", out, "-o", mpi_tmp_path / "post"], ranks=2)
+    assert run.returncode == 0, run.stderr
+    assert "free boundary" in run.stderr + run.stdout
+    assert "edges do not match" not in run.stderr + run.stdout
+    assert post.returncode == 0, post.stderr
+    with h5py.File(out, "r") as f:
+        resolved = json.loads(f.attrs["scene_resolved"])
+        step = dict(f["step_0000"].attrs)
+    assert resolved["surface"]["periodic"] is False
+    assert resolved["grid"]["nx"] == 256 and resolved["grid"]["dx"] == pytest.approx(600 / 256)
+    assert step["solution.converged"]
+    # h0' of the solve: finite differences inside the map, below the seam-raised spectrum
+    assert step["rms_slope"] < step["surface.rms_slope"]
+    analysis = json.loads((mpi_tmp_path / "post" / "gap-analysis.json").read_text())
+    (row,) = analysis["rows"]
+    assert row["rms_slope"] == pytest.approx(step["rms_slope"])
+    assert (mpi_tmp_path / "post" / "report.html").exists()
