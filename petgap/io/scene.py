@@ -593,8 +593,7 @@ class SurfaceSection:
                                          "for a file what the file says (false if it says "
                                          "nothing); false for an indenter"),
                          "solve on a periodic cell (the surface repeats) or on a free "
-                         "boundary (the map alone on an infinite half-space, no images; "
-                         "non-adhesive only)")
+                         "boundary (the map alone on an infinite half-space, no images)")
 
     @staticmethod
     def _check(values, ctx, problems):
@@ -705,12 +704,12 @@ class ControlSection:
             problems.append(("kind", "indentation", "needs a free boundary, and "
                              "surface.periodic = true (on a periodic cell an approach fixes no "
                              "load)", 'load or mean-gap, or surface.periodic = false'))
-        if values["kind"] != "none" and surface is not None and not surface.periodic \
-                and interaction is not None and interaction.kind != "hard-wall":
-            problems.append(("kind", values["kind"], "solves an adhesive interaction on a free "
-                             "boundary (surface.periodic = false), which petgap cannot: its "
-                             "adhesive solvers need the periodic half-space",
-                             'interaction.kind = "hard-wall", or surface.periodic = true'))
+        if values["kind"] == "indentation" and interaction is not None \
+                and interaction.kind != "hard-wall":
+            problems.append(("kind", "indentation", "is for the hard wall, and interaction.kind "
+                             f"= {json.dumps(interaction.kind)} (adhesion on a free boundary is "
+                             "solved on its padded cell, under load or mean gap)",
+                             'load or mean-gap, or interaction.kind = "hard-wall"'))
         if values.get("reference") is not None and interaction is not None \
                 and interaction.kind != "exponential":
             problems.append(("reference", values["reference"],
@@ -744,12 +743,11 @@ class SolverSection:
 
     @staticmethod
     def _check(values, ctx, problems):
-        surface, control = ctx.get("surface"), ctx.get("control")
-        if surface is not None and not surface.periodic and values["tao_type"] not in \
-                ("pcg", "pcg-pressure") and (control is None or control.kind != "none"):
-            problems.append(("tao_type", values["tao_type"], "needs the half-space's stiffness, "
-                             "which a free boundary (surface.periodic = false) does not have in "
-                             "fast form", '"pcg" or "pcg-pressure"'))
+        control = ctx.get("control")
+        if control is not None and control.kind == "indentation" and values["tao_type"] not in \
+                ("pcg", "pcg-pressure"):
+            problems.append(("tao_type", values["tao_type"], "does not solve indentation "
+                             "control (the pressure solver does)", '"pcg" or "pcg-pressure"'))
 
     def petsc_args(self):
         """The options as a command-line style list ``["-name", "value", ...]``."""

@@ -44,6 +44,7 @@ preconditioning -- alike.  So ``apply_sparse(..., inverse=False)`` and
 boundary (:func:`petgap.solvers.dispatch.solve` says so).
 """
 import numpy as np
+from mpi4py import MPI
 
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.parallel.collective import move_rows
@@ -73,6 +74,24 @@ def influence_coefficients(x, y, dx, dy, contact_modulus=1.0):
     total = (primitive(x + hx, y + hy) - primitive(x - hx, y + hy)
              - primitive(x + hx, y - hy) + primitive(x - hx, y - hy))
     return total / (np.pi * contact_modulus)
+
+
+def padded_kernel(cell, contact_modulus):
+    """The transform of ``C`` on the padded cell (this rank's Fourier slab, real).
+
+    ``cell`` is the ``2 nx x 2 ny`` grid of an ``nx x ny`` map (same pixels); ``C`` is
+    put at the offsets wrapped to ``|i| <= nx``, ``|j| <= ny``, so that it is even in
+    ``x`` and ``y`` and its transform real.  Unnormalised (the forward DFT's sum).
+    Collective; uses the cell's FFT buffers.
+    """
+    nx, ny = cell.nx // 2, cell.ny // 2
+    i = np.arange(cell.x_slice.start, cell.x_slice.stop)
+    j = np.arange(2 * ny)
+    xi = np.where(i <= nx, i, i - 2 * nx) * cell.dx
+    yj = np.where(j <= ny, j, j - 2 * ny) * cell.dy
+    cell.real[...] = influence_coefficients(xi[:, None], yj[None, :], cell.dx, cell.dy,
+                                            contact_modulus)
+    return cell.forward().real.copy()
 
 
 class FreeHalfSpace:
@@ -106,16 +125,8 @@ class FreeHalfSpace:
         self.cell = Grid((2 * nx, 2 * ny), size=(2 * grid.Lx, 2 * grid.Ly), comm=grid.comm,
                          planner=grid.planner, wisdom=grid.wisdom)
         cell = self.cell
-        i = np.arange(cell.x_slice.start, cell.x_slice.stop)
-        j = np.arange(2 * ny)
-        # offsets of the padded cell's points from the origin, wrapped to |i| <= nx
-        xi = np.where(i <= nx, i, i - 2 * nx) * grid.dx
-        yj = np.where(j <= ny, j, j - 2 * ny) * grid.dy
-        cell.real[...] = influence_coefficients(xi[:, None], yj[None, :], grid.dx, grid.dy,
-                                                self.contact_modulus)
-        # C is even in x and y, so its transform is real; the inverse transform's
-        # 1 / (4 nx ny) is folded in
-        self._kernel = cell.forward().real / cell.npoints
+        # the inverse transform's 1 / (4 nx ny) folded in
+        self._kernel = padded_kernel(cell, self.contact_modulus) / cell.npoints
         self._rows = (cell.x_slice.start, min(cell.x_slice.stop, nx))  # map rows held here
         self._applications = 0
 
@@ -188,3 +199,120 @@ class FreeHalfSpace:
         u = self.displacement(pressure)
         local = float(np.vdot(pressure, u))
         return 0.5 * self.grid.pixel_area * self.grid.comm.allreduce(local)
+
+
+class PaddedCellHalfSpace:
+    """The padded cell of a free map as a periodic body: ``C`` and ``C^{-1}`` by their symbols.
+
+    What the gap formulation (adhesion) needs on a free boundary: the stiffness, which
+    the map alone does not have in fast form, exists on the ``2 nx x 2 ny`` cell as the
+    inverse of the circulant ``C`` (its transform is positive: ``C`` is the sampled,
+    pixel-averaged Boussinesq kernel, a positive definite function, checked when built).
+    A problem on the cell whose surface lies out of reach outside the map (no pressure
+    there at the solution, hence none from the images) is the free map's problem
+    (:func:`petgap.solvers.free_boundary.solve_on_cell`).  The ``q = 0`` mode is
+    dropped, as on any periodic cell: the mean pressure of the cell is the control's.
+
+    The interface is :class:`~petgap.mechanics.half_space.ElasticHalfSpace`'s; ``periodic``
+    is True (the cell is), the transforms are not fused with the multiplication.
+
+    Parameters
+    ----------
+    cell : petgap.parallel.grid.Grid
+        The ``2 nx x 2 ny`` grid (pixels of the map).
+    contact_modulus : float
+    """
+
+    periodic = True
+
+    def __init__(self, cell, contact_modulus=1.0):
+        contact_modulus = float(contact_modulus)
+        if not (np.isfinite(contact_modulus) and contact_modulus > 0):
+            raise ValueError(f"contact_modulus must be positive and finite, got {contact_modulus}")
+        if cell.nx % 2 or cell.ny % 2:
+            raise ValueError(f"a padded cell has even sides, not {cell.nx} x {cell.ny}")
+        self.grid, self.contact_modulus = cell, contact_modulus
+        kernel = padded_kernel(cell, contact_modulus)
+        smallest = cell.comm.allreduce(float(kernel.min(initial=np.inf)), op=MPI.MIN)
+        if not smallest > 0:
+            raise ValueError(f"the padded kernel's transform is not positive ({smallest:g}); "
+                             f"its inverse is no stiffness")
+        n = cell.npoints
+        self._compliance = kernel / n
+        self._stiffness = 1.0 / (kernel * n)
+        if cell.ky_slice.start == 0:   # the q = 0 mode sits on the rank with ky = 0
+            self._compliance[0, 0] = self._stiffness[0, 0] = 0.0
+        self._point_stiffness = None
+        self._applications = 0
+
+    def on_grid(self, grid):
+        """The padded cell of the map on a coarser grid (a coarse start's)."""
+        return PaddedCellHalfSpace(grid, self.contact_modulus)
+
+    @property
+    def applications(self):
+        return self._applications
+
+    def _multiply(self, symbol):
+        grid = self.grid
+        self._applications += 1
+        with event(OPERATOR_EVENT):
+            grid.forward()
+            grid.fourier *= symbol
+            grid.backward()
+
+    def apply_in_buffer(self, inverse=False):
+        """``grid.real <- C grid.real`` (``inverse``) or ``C^{-1} grid.real``, zero mean."""
+        self._multiply(self._compliance if inverse else self._stiffness)
+        return self.grid.real
+
+    def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None):
+        """As :meth:`ElasticHalfSpace.apply_sparse <petgap.mechanics.half_space.ElasticHalfSpace.apply_sparse>`."""
+        grid = self.grid
+        padded = grid.padded
+        padded[...] = 0.0
+        padded.reshape(-1)[pidx] = values
+        self._multiply(self._compliance if inverse else self._stiffness)
+        if gathered is not None:
+            gathered[...] = padded.reshape(-1)[pidx]
+        elif out is not None:
+            out[:, :grid.ny] = grid.real
+
+    def _apply(self, field, symbol, out):
+        grid = self.grid
+        np.copyto(grid.real, field)
+        self._multiply(symbol)
+        if out is None:
+            return grid.real.copy()
+        np.copyto(out, grid.real)
+        return out
+
+    def pressure(self, displacement, out=None):
+        """Zero-mean pressure ``C^{-1} u`` on the cell."""
+        return self._apply(displacement, self._stiffness, out)
+
+    def displacement(self, pressure, out=None):
+        """Zero-mean displacement ``C p`` on the cell."""
+        return self._apply(pressure, self._compliance, out)
+
+    def point_stiffness(self):
+        """The diagonal of ``C^{-1}`` (q = 0 left out).  Collective; cached."""
+        if self._point_stiffness is None:
+            grid = self.grid
+            local = float(np.sum(grid.hermitian_weight[:, None] * self._stiffness))
+            self._point_stiffness = grid.comm.allreduce(local)
+        return self._point_stiffness
+
+    def _power(self, field, symbol):
+        grid = self.grid
+        grid.forward(field)
+        local = float(np.sum(grid.hermitian_weight[:, None] * symbol * np.abs(grid.fourier) ** 2))
+        return 0.5 * grid.pixel_area * grid.comm.allreduce(local)
+
+    def energy(self, displacement):
+        """``(1/2) sum dx dy p u`` with ``p = C^{-1} u`` (zero-mean part)."""
+        return self._power(displacement, self._stiffness)
+
+    def complementary_energy(self, pressure):
+        """``(1/2) sum dx dy p u`` with ``u = C p`` (zero-mean part)."""
+        return self._power(pressure, self._compliance)

@@ -28,10 +28,12 @@ Solver types
     pressure ``P0`` is adjusted by a secant iteration on ``log(P0 / h0' E*)``
     around inexact inner solves until the mean gap matches.
 
-On a free boundary (:class:`petgap.mechanics.free_half_space.FreeHalfSpace`) only
-``pcg-pressure`` runs, for the hard wall: under load, under
+On a free boundary (:class:`petgap.mechanics.free_half_space.FreeHalfSpace`) the hard
+wall runs ``pcg-pressure`` on the map: under load, under
 :class:`~petgap.mechanics.problem.Indentation`, and under a mean gap through the
 indentation (:func:`petgap.solvers.pressure_cg.solve_mean_gap_by_indentation`).
+Adhesion, and the solvers on the gap, run on the map's padded periodic cell
+(:mod:`petgap.solvers.free_boundary`), under load or mean gap.
 
 Every type stops on the same unit-free KKT test (largest pressure violation
 over ``h0' E*`` and gap violation over ``h0`` below ``tolerance``), never on
@@ -42,6 +44,7 @@ TAO's reason when it stops for any other cause.
 from petsc4py import PETSc
 
 from petgap.mechanics.problem import Indentation, Load, MeanGap
+from petgap.solvers.free_boundary import solve_on_cell
 from petgap.solvers.pressure_cg import (full_contact_state, solve_mean_gap_by_indentation,
                                         touching_state)
 from petgap.solvers.tao import (PETGAP_TYPES, petsc_options, solve_load_by_mean_gap,
@@ -91,9 +94,17 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
         raise ValueError(f"-tao_type {tao_type} is not supported; use one of {', '.join(SOLVER_TYPES)}")
     adhesive = problem.interaction.adhesive
     periodic = problem.half_space.periodic
-    if not periodic:
-        _check_free_boundary(adhesive, tao_type)
-    elif isinstance(control, Indentation):
+    if not periodic and (adhesive or tao_type not in ("pcg", "pcg-pressure")):
+        if isinstance(control, Indentation):
+            raise ValueError("indentation control is for the hard wall with pcg or "
+                             "pcg-pressure; adhesion (and the gap solvers) on a free boundary "
+                             "take load or mean-gap control")
+        def on_cell(cell_problem, cell_control, warm):
+            return _solve(cell_problem, cell_control, tao_type, adhesive, tolerance,
+                          max_iterations, warm, options, monitor)
+        return solve_on_cell(problem, control, on_cell, tolerance=tolerance,
+                             max_iterations=max_iterations, initial=initial)
+    if isinstance(control, Indentation) and periodic:
         raise ValueError("indentation control needs a free boundary (surface.periodic = "
                          "false): on a periodic cell an approach fixes no load; use load or "
                          "mean-gap control")
@@ -116,18 +127,6 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
                       options, monitor)
     solution.operator_applications += checked
     return solution
-
-
-def _check_free_boundary(adhesive, tao_type):
-    """Refuse what the free boundary cannot do: its stiffness has no fast form."""
-    if adhesive:
-        raise ValueError("adhesion on a free boundary is not available: the adhesive "
-                         "solvers work on the gap and need the half-space's stiffness, which "
-                         "only the periodic half-space has in fast form; solve it periodic "
-                         "(surface.periodic = true)")
-    if tao_type not in ("pcg", "pcg-pressure"):
-        raise ValueError(f"solver {tao_type!r} needs the half-space's stiffness, which a free "
-                         f"boundary does not have in fast form; use pcg or pcg-pressure")
 
 
 def _solve(problem, control, tao_type, adhesive, tolerance, max_iterations, initial, options,

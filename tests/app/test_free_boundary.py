@@ -79,9 +79,9 @@ def test_periodic_defaults(comm, mpi_tmp_path):
     ({"surface": {"kind": "paraboloid", "radius": 500.0, "periodic": True}}, "control.kind",
      "needs a free boundary"),
     ({"interaction": {"kind": "exponential", "work_of_adhesion": 1e-3, "range": 1.0}},
-     "control.kind", "adhesive interaction on a free boundary"),
+     "control.kind", "is for the hard wall"),
     ({"solver": {"planner": "estimate", "tao_type": "bncg"}}, "solver.tao_type",
-     "does not have in fast form"),
+     "does not solve indentation control"),
     ({"surface": {"kind": "flat-punch"}}, "surface.radius", "missing"),
     ({"surface": {"kind": "paraboloid", "radius": -1.0}}, "surface.radius", "out of range"),
 ])

@@ -5,7 +5,8 @@ import pytest
 from mpi4py import MPI
 
 import petgap
-from petgap.mechanics.free_half_space import FreeHalfSpace, influence_coefficients
+from petgap.mechanics.free_half_space import (FreeHalfSpace, PaddedCellHalfSpace,
+                                               influence_coefficients)
 from petgap.parallel.grid import Grid
 from petgap.surfaces.indenters import indenter
 
@@ -170,12 +171,73 @@ def test_free_boundary_is_rank_independent(comm):
 def test_what_a_free_boundary_cannot_do(comm):
     grid, problem = _hertz(comm, n=64, a=16.0)
     adhesive = problem.with_interaction(petgap.ExponentialAdhesion(1e-3, 1.0))
-    with pytest.raises(ValueError, match="adhesion on a free boundary is not available"):
-        petgap.solve(adhesive, petgap.Load(1e-4))
-    with pytest.raises(ValueError, match="needs the half-space's stiffness"):
-        petgap.solve(problem, petgap.Load(1e-4), solver="bncg")
+    with pytest.raises(ValueError, match="indentation control is for the hard wall"):
+        petgap.solve(adhesive, petgap.Indentation(1.0))
+    with pytest.raises(ValueError, match="indentation control is for the hard wall"):
+        petgap.solve(problem, petgap.Indentation(1.0), solver="bncg")
     periodic = petgap.ContactProblem(grid, problem.topography, petgap.ElasticHalfSpace(grid))
     with pytest.raises(ValueError, match="indentation control needs a free boundary"):
         petgap.solve(periodic, petgap.Indentation(1.0))
     with pytest.raises(ValueError, match="depth -1.0 < 0"):
         petgap.solve(problem, petgap.Indentation(-1.0))
+
+
+def test_padded_cell_is_the_free_map(comm):
+    """The hard wall solved on the padded cell (the gap solver's route) is the map's own
+    free solution; the cell's stiffness inverts its compliance."""
+    grid, problem = _hertz(comm, n=64, a=16.0, radius=200.0)
+    on_map = petgap.solve(problem, petgap.Load(0.002))
+    on_cell = petgap.solve(problem, petgap.Load(0.002), solver="pcg-gap")
+    assert on_map.converged and on_cell.converged
+    assert "padded cell" in on_cell.start and "padded cell" not in on_map.start
+    scale = comm.allreduce(float(np.abs(on_map.pressure).max()), op=MPI.MAX)
+    assert comm.allreduce(float(np.abs(on_map.pressure - on_cell.pressure).max()),
+                          op=MPI.MAX) < 1e-6 * scale
+    assert on_cell.contact_fraction == on_map.contact_fraction
+    cell = problem.half_space.cell
+    body = PaddedCellHalfSpace(cell, 1.0)
+    u = np.random.default_rng(cell.x_slice.start).standard_normal(cell.local_shape)
+    u -= cell.mean(u)
+    np.testing.assert_allclose(body.displacement(body.pressure(u)), u, atol=1e-10)
+    assert body.energy(u) == pytest.approx(body.complementary_energy(body.pressure(u)),
+                                           rel=1e-10)
+
+
+def _adhesive_sphere(comm, n, body):
+    grid = Grid((n, n), comm=comm, planner="estimate", wisdom=False)
+    half_space = FreeHalfSpace(grid) if body == "free" else petgap.ElasticHalfSpace(grid)
+    problem = petgap.ContactProblem(grid, indenter(grid, "paraboloid", 200.0), half_space,
+                                    petgap.ExponentialAdhesion(0.02, 1.0))
+    s = petgap.solve(problem, petgap.Load(4.096 / grid.area))   # the same force on every map
+    return grid, problem, s
+
+
+def test_adhesive_sphere_free_and_periodic(comm):
+    """An adhesive sphere (rho = a0, a ~ 19 a0) on free maps of 128^2 and 192^2 and on a
+    periodic cell of 512^2, under the same force: the same contact, peak pressure and
+    attractive force.  On the free maps the surface ends at the map's edge, where the gap
+    is above 10 rho; the periodic cell's attraction runs on beyond it, and its spectral
+    discretisation differs from the pixels' uniform pressures (a few 1e-4 in F_att)."""
+    results = {(body, n): _adhesive_sphere(comm, n, body)
+               for body, n in (("free", 128), ("free", 192), ("periodic", 512))}
+    summary = {}
+    for key, (grid, problem, s) in results.items():
+        summary[key] = (s.converged, round(s.contact_fraction * grid.npoints),
+                        comm.allreduce(float(s.pressure.max()), op=MPI.MAX), s.attractive_force)
+    small, large, periodic = summary["free", 128], summary["free", 192], summary["periodic", 512]
+    assert small[0] and large[0] and periodic[0]
+    assert small[1] == large[1] == periodic[1]
+    assert small[2] == pytest.approx(large[2], rel=1e-5)
+    assert small[2] == pytest.approx(periodic[2], rel=1e-4)
+    assert small[3] < 0 and small[3] == pytest.approx(large[3], rel=1e-4)
+    assert small[3] == pytest.approx(periodic[3], rel=1e-3)
+
+
+def test_adhesive_free_map_under_mean_gap_and_on_any_rank_count(comm):
+    grid, problem, by_load = _adhesive_sphere(comm, 64, "free")
+    s = petgap.solve(problem, petgap.MeanGap(by_load.mean_gap))
+    assert s.converged and s.mean_gap == pytest.approx(by_load.mean_gap, rel=1e-7)
+    assert s.mean_pressure == pytest.approx(by_load.mean_pressure, rel=1e-4)
+    _, _, alone = _adhesive_sphere(MPI.COMM_SELF, 64, "free")
+    np.testing.assert_allclose(by_load.pressure, alone.pressure[grid.x_slice], rtol=0,
+                               atol=1e-9 * np.abs(alone.pressure).max())

@@ -1,0 +1,145 @@
+"""Adhesion on a free boundary: the map's problem solved on its padded periodic cell.
+
+The gap formulation of adhesion (:mod:`petgap.solvers.gap_cg`) applies the
+half-space's stiffness, which a free map has in no fast form
+(:mod:`petgap.mechanics.free_half_space`).  Its ``2 nx x 2 ny`` padded cell has one:
+there the compliance ``C`` is a circulant with a positive symbol, so
+``K = C^{-1}`` is diagonal in Fourier space
+(:class:`~petgap.mechanics.free_half_space.PaddedCellHalfSpace`).  The map's problem is
+the cell's problem with the surface out of reach outside the map:
+
+* Outside the map the cell's topography is ``min(h) - far``, with ``far`` the map's
+  height range plus :data:`REACH` interaction ranges: the gap there stays above
+  ``REACH rho`` (the map's own gaps are smaller, and ``u`` is continuous), where the
+  wall never acts and ``v'(g) = (w / rho) exp(-REACH)`` is nothing.  So at the cell's
+  solution the pressure outside the map is zero, and on the map the cell's
+  compliance is the linear convolution of the free map (Hockney): the cell's solution
+  restricted to the map is the free map's solution.
+* The cell's ``q = 0`` mode is the control's, as on any periodic cell: a map load
+  ``P0`` is the cell load ``P0 nx ny / (4 nx ny) = P0 / 4``; a mean gap of the map is
+  found by secant steps on the cell's mean gap, which differs from it by the gaps
+  outside (about ``far`` each, a quarter of the points being inside).
+* The KKT scales and statistics are the map's (those of the problem given).
+
+Cost: the whole solve runs on four times the points (fields and passes, not only the
+transforms as for the hard wall, which :mod:`petgap.solvers.pressure_cg` solves on the
+map with the padded transform alone).
+"""
+import numpy as np
+from mpi4py import MPI
+
+from petgap.mechanics.free_half_space import PaddedCellHalfSpace
+from petgap.mechanics.problem import ContactProblem, Load, MeanGap
+from petgap.parallel.collective import move_rows
+from petgap.solvers.convergence import Timer
+
+#: Interaction ranges between the cell's surface outside the map and the map's lowest
+#: point: the gap outside stays above this many ``rho``.
+REACH = 200.0
+
+
+def cell_problem(problem):
+    """The map's problem on its padded cell (made once per problem and kept).  Collective."""
+    def make():
+        grid, cell = problem.grid, problem.half_space.cell
+        comm = grid.comm
+        h = problem.topography
+        low = comm.allreduce(float(np.min(h, initial=np.inf)), op=MPI.MIN)
+        rho = problem.interaction.range if problem.interaction.adhesive else 0.0
+        far = problem.top_height - low + REACH * max(rho, problem.gap_scale)
+        heights = np.full(cell.local_shape, low - far)
+        _to_cell(grid, cell, h, heights)
+        body = PaddedCellHalfSpace(cell, problem.half_space.contact_modulus)
+        on_cell = ContactProblem(cell, heights, body, problem.interaction)
+        # the map's scales: the residuals mean what they mean for the map
+        on_cell.rms_height, on_cell.rms_slope = problem.rms_height, problem.rms_slope
+        on_cell.pressure_scale, on_cell.gap_scale = problem.pressure_scale, problem.gap_scale
+        return on_cell
+    return problem.derived("padded cell problem", make)
+
+
+def _to_cell(grid, cell, field, out):
+    """Write this rank's map rows ``field`` into the cell's slab ``out`` (rows 0..nx-1, columns 0..ny-1)."""
+    lo, hi = cell.x_slice.start, min(cell.x_slice.stop, grid.nx)
+    for row, piece in move_rows(grid.comm, field, grid.x_slice.start, lo, max(hi, lo)):
+        out[row - lo:row - lo + len(piece), :grid.ny] = piece
+
+
+def _to_map(grid, cell, field):
+    """This rank's map rows of the cell's slab ``field``."""
+    lo, hi = cell.x_slice.start, min(cell.x_slice.stop, grid.nx)
+    held = np.ascontiguousarray(field[:max(hi - lo, 0), :grid.ny])
+    out = np.empty(grid.local_shape)
+    start, stop = grid.x_slice.start, grid.x_slice.stop
+    for row, piece in move_rows(grid.comm, held, lo, start, stop):
+        out[row - start:row - start + len(piece)] = piece
+    return out
+
+
+def solve_on_cell(problem, control, solve, *, tolerance, max_iterations, initial=None,
+                  max_solves=50):
+    """Solve the free map ``problem`` under ``control`` on its padded cell.
+
+    ``solve(cell_problem, cell_control, initial)`` solves a periodic problem (the
+    dispatcher's own, with its options, tolerance and monitor).  Returns the map's
+    :class:`~petgap.mechanics.problem.ContactSolution`, with the cell's solution kept as
+    ``solution.cell_solution`` for the next warm start.  Collective.
+    """
+    timer = Timer()
+    grid = problem.grid
+    on_cell = cell_problem(problem)
+    cell = on_cell.grid
+    start_ops = problem.operator_applications + on_cell.operator_applications
+    warm = getattr(initial, "cell_solution", None)
+    fraction = grid.npoints / cell.npoints
+    if isinstance(control, Load):
+        solution = solve(on_cell, Load(control.mean_pressure * fraction), warm)
+        solves, iterations, history = 1, solution.iterations, list(solution.history)
+        converged, reason = solution.converged, solution.reason
+    elif isinstance(control, MeanGap):
+        # the cell's mean gap less the map's is the outside points' share, estimated as if
+        # u were the same outside as inside (the secant steps correct it)
+        h_out = grid.comm.allreduce(float(np.min(on_cell.topography, initial=np.inf)),
+                                    op=MPI.MIN)
+        target = control.mean_gap
+        guess = target + (1 - fraction) * (problem.mean_height - h_out)
+        previous, solves, iterations, history = None, 0, 0, []
+        converged, reason = False, "max_solves"
+        while solves < max_solves:
+            solution = solve(on_cell, MeanGap(guess), warm)
+            solves += 1
+            iterations += solution.iterations
+            history.extend(solution.history)
+            gap = _to_map(grid, cell, solution.gap)
+            mean = grid.comm.allreduce(float(gap.sum())) / grid.npoints
+            if not solution.converged:
+                reason = solution.reason
+                break
+            if abs(mean - target) <= tolerance * problem.gap_scale:
+                converged, reason = True, solution.reason
+                break
+            slope = 1.0
+            if previous is not None and guess != previous[0]:
+                slope = (mean - previous[1]) / (guess - previous[0])
+                slope = slope if slope > 1e-3 else 1.0
+            previous = (guess, mean)
+            guess += (target - mean) / slope
+            warm = solution
+    else:
+        raise ValueError(f"control {control!r}: a free boundary with adhesion takes load or "
+                         f"mean-gap control")
+    gap = _to_map(grid, cell, solution.gap)
+    pressure = _to_map(grid, cell, solution.pressure)
+    contact = gap <= 0
+    start = "; ".join(filter(None, [f"solved on the {cell.nx}x{cell.ny} padded cell"
+                                    + (f" ({solves} mean-gap solves)" if solves > 1 else ""),
+                                    solution.start]))
+    mapped = problem.make_solution(
+        gap, pressure, contact, control, converged=converged, reason=reason,
+        solver=solution.solver, iterations=iterations,
+        operator_applications=problem.operator_applications + on_cell.operator_applications
+        - start_ops, wall_time=timer(), history=history, start=start,
+        start_time=solution.start_time)
+    mapped.negative_curvature_steps = solution.negative_curvature_steps
+    mapped.cell_solution = solution
+    return mapped
