@@ -89,9 +89,13 @@ def padded_kernel(cell, contact_modulus):
     j = np.arange(2 * ny)
     xi = np.where(i <= nx, i, i - 2 * nx) * cell.dx
     yj = np.where(j <= ny, j, j - 2 * ny) * cell.dy
-    cell.real[...] = influence_coefficients(xi[:, None], yj[None, :], cell.dx, cell.dy,
-                                            contact_modulus)
-    return cell.forward().real.copy()
+    step = max(1, (1 << 16) // len(j))   # rows at a time: temporaries of 64k points
+    for start in range(0, len(i), step):
+        rows = slice(start, start + step)
+        cell.real[rows] = influence_coefficients(xi[rows, None], yj[None, :], cell.dx,
+                                                 cell.dy, contact_modulus)
+    kernel = cell.forward().real.copy()
+    return kernel
 
 
 class FreeHalfSpace:
@@ -126,7 +130,8 @@ class FreeHalfSpace:
                          planner=grid.planner, wisdom=grid.wisdom)
         cell = self.cell
         # the inverse transform's 1 / (4 nx ny) folded in
-        self._kernel = padded_kernel(cell, self.contact_modulus) / cell.npoints
+        self._kernel = padded_kernel(cell, self.contact_modulus)
+        self._kernel /= cell.npoints
         self._rows = (cell.x_slice.start, min(cell.x_slice.stop, nx))  # map rows held here
         self._applications = 0
 
@@ -238,8 +243,9 @@ class PaddedCellHalfSpace:
             raise ValueError(f"the padded kernel's transform is not positive ({smallest:g}); "
                              f"its inverse is no stiffness")
         n = cell.npoints
-        self._compliance = kernel / n
-        self._stiffness = 1.0 / (kernel * n)
+        self._stiffness = np.reciprocal(kernel * n)
+        kernel /= n
+        self._compliance = kernel
         if cell.ky_slice.start == 0:   # the q = 0 mode sits on the rank with ky = 0
             self._compliance[0, 0] = self._stiffness[0, 0] = 0.0
         self._point_stiffness = None

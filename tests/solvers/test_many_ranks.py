@@ -1,0 +1,77 @@
+"""Beyond the two ranks of the suite: 8 and 16 ranks (oversubscribed) against one.
+
+The grid is awkward on purpose: 242 x 180 leaves 16 ranks blocks of 16 real rows and
+one of 2, and 12 Fourier rows and one of 1; its coarse start (121 x 90, odd) and the
+free boundary's padded cell (484 x 360) split unevenly too, and rows cross between
+the map's and the cell's decompositions on every application.  Each run solves, in
+one subprocess: the hard wall under load (pressure CG from the coarse start), the
+adhesive contact under mean gap (gap CG), and the hard wall on a free boundary under
+load; the fields, iteration counts and scalars must equal the one-rank solves to
+round-off (the decompositions only reorder sums).
+"""
+import json
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+SHAPE = (242, 180)
+
+SCRIPT = textwrap.dedent("""
+    import json, sys
+    from pathlib import Path
+    import numpy as np
+    from mpi4py import MPI
+    import petgap
+
+    out = Path(sys.argv[1])
+    comm = MPI.COMM_WORLD
+    grid = petgap.Grid(tuple(json.loads(sys.argv[2])), size=(121.0, 90.0), comm=comm,
+                       planner="estimate", wisdom=False)
+    h = petgap.self_affine(grid, 0.7, 6.0, rms_slope=0.1, seed=5)
+    law = petgap.ExponentialAdhesion(2e-4, 1.0)
+    cases = [(petgap.ElasticHalfSpace(grid), None, petgap.Load(0.004)),
+             (petgap.ElasticHalfSpace(grid), law, petgap.MeanGap(0.15)),
+             (petgap.FreeHalfSpace(grid), None, petgap.Load(0.004))]
+    for k, (body, interaction, control) in enumerate(cases):
+        problem = petgap.ContactProblem(grid, h, body, interaction)
+        sol = petgap.solve(problem, control, tolerance=1e-10)
+        gap, pressure = grid.gather(sol.gap), grid.gather(sol.pressure)
+        if comm.rank == 0:
+            np.save(out / f"gap{k}.npy", gap)
+            np.save(out / f"pressure{k}.npy", pressure)
+            scalars = {key: (v if isinstance(v, (bool, str)) else float(v))
+                       for key, v in sol.scalars().items()}
+            (out / f"scalars{k}-{comm.size}.json").write_text(json.dumps(scalars))
+            np.save(out / f"gap{k}-{comm.size}.npy", gap)
+            np.save(out / f"pressure{k}-{comm.size}.npy", pressure)
+""")
+
+
+@pytest.mark.parametrize("ranks", [8, 16])
+def test_many_ranks_equal_one(comm, mpi_tmp_path, run_cli, ranks):
+    if comm.rank == 0:
+        (mpi_tmp_path / "solve.py").write_text(SCRIPT)
+    comm.Barrier()
+    shape = json.dumps(list(SHAPE))
+    one = run_cli([sys.executable, mpi_tmp_path / "solve.py", mpi_tmp_path, shape], ranks=1,
+                  timeout=300)
+    many = run_cli([sys.executable, mpi_tmp_path / "solve.py", mpi_tmp_path, shape],
+                   ranks=ranks, timeout=600)
+    assert one.returncode == 0, one.stderr[-3000:]
+    assert many.returncode == 0, many.stderr[-3000:]
+    for k in range(3):
+        a = json.loads((mpi_tmp_path / f"scalars{k}-1.json").read_text())
+        b = json.loads((mpi_tmp_path / f"scalars{k}-{ranks}.json").read_text())
+        assert a["converged"] and b["converged"], (k, a["reason"], b["reason"])
+        assert a["iterations"] == b["iterations"], k
+        assert a["contact_fraction"] == b["contact_fraction"], k
+        for key in ("mean_gap", "mean_pressure", "elastic_energy"):
+            assert b[key] == pytest.approx(a[key], rel=1e-11, abs=1e-14), (k, key)
+        for field in ("gap", "pressure"):
+            x = np.load(mpi_tmp_path / f"{field}{k}-1.npy")
+            y = np.load(mpi_tmp_path / f"{field}{k}-{ranks}.npy")
+            assert np.abs(x - y).max() <= 1e-11 * np.abs(x).max(), (k, field)
+    assert MPI.COMM_WORLD.size >= 1
