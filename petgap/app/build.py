@@ -379,8 +379,12 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
     if not model.steps:
         return model
     modulus = scene.material.contact_modulus
-    model.half_space = (ElasticHalfSpace(grid, modulus) if scene.surface.periodic
-                        else FreeHalfSpace(grid, modulus))
+    if scene.surface.periodic:
+        model.half_space = ElasticHalfSpace(grid, modulus)
+    else:
+        with _timed(log, f"free boundary: planning the {2 * grid.nx}x{2 * grid.ny} padded "
+                         f"cell's FFTs and transforming its kernel"):
+            model.half_space = FreeHalfSpace(grid, modulus)
     model.problem = ContactProblem(grid, topography, model.half_space)
     interaction = scene.interaction
     if interaction.kind == "exponential":

@@ -1,0 +1,198 @@
+#!/usr/bin/env python3
+"""A performance model of a petgap solve, fitted here, used to plan cluster runs.
+
+One iteration of the default solver (``pcg-pressure``) costs ``k`` FFT pairs (``k`` about
+2.9: ``docs/benchmarks.md``) plus passes over the contact set and the slab, and a few
+reductions.  The model:
+
+* **FFT pair** on ``P`` ranks of an ``n x n`` grid (``N = n^2`` points)::
+
+      T_pair(N, P) = c N log2(N) / P  +  4 V(N, P) / B  +  4 (P - 1) l
+
+  the first term the local 1D transforms (``c``: seconds per point and level, fitted on one
+  rank), the second the four all-to-all transposes of a pair (forward and backward
+  transforms, one transpose each way; ``V = 8 N (P - 1) / P^2`` bytes leave each rank per
+  transpose: the real slab's half-spectrum, 16-byte complex values, ``N / 2`` of them, split
+  into ``P`` pieces), at the bandwidth ``B`` per rank, and the last their message latency
+  ``l``.  On one node ``B`` and ``l`` are the shared-memory ones (``B`` fitted from 2 ranks
+  here); across nodes the bytes bound for other nodes go through the node's network
+  interface, shared by its ``C`` ranks: ``B_net / C`` per rank for the fraction
+  ``(P - C) / (P - 1)`` of the volume (``--network-gbs``, ``--latency-us``: not measurable on
+  this machine, so given, with defaults of a 100 Gb/s InfiniBand node).
+* **Iteration**: ``t_it = k T_pair + r N / P`` (``r``: the solver's own passes per point,
+  fitted from a measured solve's time per iteration beside the floor on one rank).
+* **Iterations** of the GUIDE surface grow like ``a + b log2(n)^2`` (fitted to the measured
+  counts given with ``--iterations``, the defaults being docs/benchmarks.md's).
+* **Memory per rank**: ``91 MB + 84 B x N / P`` (runs/README.md, "Memory").
+
+``--check-slurm`` reads ``runs/slurm/petgap.sbatch`` (nodes, ranks per node, memory per CPU,
+time limit) and says whether the paper's 65536^2 solve fits in it by the model.
+
+Usage::
+
+    python benchmarks/model.py [--sizes 512 1024 2048 4096] [--solve-size 1024]
+        [--network-gbs 12.5] [--latency-us 2] [--cores-per-node 64] [--check-slurm]
+"""
+import argparse
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+#: FFT pairs per iteration of pcg-pressure (docs/benchmarks.md: 2.77-2.97).
+PAIRS_PER_ITERATION = 2.9
+#: Bytes per point and fixed bytes per rank of a whole non-adhesive run (runs/README.md).
+BYTES_PER_POINT, FIXED_BYTES = 84.0, 91e6
+#: Iterations of the GUIDE surface at 512^2-4096^2 (docs/benchmarks.md, coarse start).
+ITERATIONS = {512: 20, 1024: 25, 2048: 35, 4096: 60}
+
+
+def solve_worker(n):
+    """Time one pcg-pressure solve of the GUIDE surface on one rank; print JSON."""
+    from mpi4py import MPI
+    import petgap
+    grid = petgap.Grid((n, n), comm=MPI.COMM_WORLD)
+    h = petgap.self_affine(grid, 0.8, 32.0, n / 2, rms_slope=0.1, seed=1)
+    problem = petgap.ContactProblem(grid, h, petgap.ElasticHalfSpace(grid))
+    petgap.solve(problem, petgap.Load(0.002), tolerance=1e-2)      # plans, first touch
+    t = time.perf_counter()
+    s = petgap.solve(problem, petgap.Load(0.002), tolerance=1e-8)
+    dt = time.perf_counter() - t - s.start_time
+    print("SOLVE " + json.dumps({"iterations": s.iterations, "time": dt,
+                                 "pairs": s.operator_applications}), flush=True)
+
+
+def fit(sizes, solve_size):
+    """Fit c, B (2 ranks), l and r from floors on 1 and 2 ranks and one solve."""
+    from floor import fft_floor
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    one = {n: fft_floor(n, 1) for n in sizes}
+    two = {n: fft_floor(n, 2) for n in sizes}
+    work = np.array([n * n * math.log2(n * n) for n in sizes])
+    c = float(np.dot(work, [one[n] for n in sizes]) / np.dot(work, work))
+    # two ranks: c N log N / 2 + 4 V / B + 4 l, V = 8 N / 4 = 2 N bytes per transpose
+    volume = np.array([4 * 2.0 * n * n for n in sizes])
+    rest = np.array([two[n] - c * n * n * math.log2(n * n) / 2 for n in sizes])
+    design = np.stack([volume, np.full(len(sizes), 4.0)], axis=1)
+    (inv_b, latency), *_ = np.linalg.lstsq(design, rest, rcond=None)
+    proc = subprocess.run(["mpirun", "-n", "1", sys.executable, __file__, "--solve-worker",
+                           str(solve_size)], capture_output=True, text=True, env=env,
+                          timeout=3600)
+    solve = json.loads(proc.stdout.split("SOLVE ", 1)[1].splitlines()[0])
+    per_it = solve["time"] / solve["iterations"]
+    pairs = solve["pairs"] / solve["iterations"]
+    r = max(per_it - pairs * one[solve_size], 0.0) / solve_size ** 2
+    return {"c": c, "inv_bandwidth": max(float(inv_b), 0.0), "latency": max(float(latency), 0.0),
+            "r": r, "floors_1": one, "floors_2": two, "solve": solve, "pairs_per_it": pairs}
+
+
+def iterations_model(measured):
+    """``(a, b)`` of iterations = a + b log2(n)^2, least squares."""
+    x = np.array([math.log2(n) ** 2 for n in measured])
+    y = np.array(list(measured.values()), dtype=float)
+    b, a = np.polyfit(x, y, 1)
+    return float(a), float(b)
+
+
+def pair_time(n, ranks, cores_per_node, model, network_bw, network_latency):
+    """Model seconds of one FFT pair of n^2 on ``ranks`` ranks, ``cores_per_node`` per node."""
+    N = float(n) * n
+    compute = model["c"] * N * math.log2(N) / ranks
+    if ranks == 1:
+        return compute
+    volume = 8.0 * N * (ranks - 1) / ranks ** 2          # bytes leaving a rank per transpose
+    local = min(cores_per_node, ranks)
+    off_node = (ranks - local) / (ranks - 1)
+    t_local = volume * (1 - off_node) * model["inv_bandwidth"]
+    t_net = volume * off_node * local / network_bw
+    latency = (ranks - 1) * (model["latency"] if off_node == 0 else network_latency)
+    return compute + 4 * (t_local + t_net + latency)
+
+
+def predict(n, nodes, cores_per_node, model, its_ab, network_bw, network_latency):
+    ranks = nodes * cores_per_node
+    its = its_ab[0] + its_ab[1] * math.log2(n) ** 2
+    t_pair = pair_time(n, ranks, cores_per_node, model, network_bw, network_latency)
+    t_it = model["pairs_per_it"] * t_pair + model["r"] * n * n / ranks
+    memory = FIXED_BYTES + BYTES_PER_POINT * n * n / ranks
+    return {"ranks": ranks, "iterations": its, "pair_s": t_pair, "solve_s": its * t_it,
+            "memory_per_rank": memory}
+
+
+def slurm_settings(path):
+    text = Path(path).read_text()
+    get = lambda key: re.search(rf"^#SBATCH --{key}=(\S+)", text, re.M).group(1)  # noqa: E731
+    hours, minutes, seconds = (int(v) for v in get("time").split(":"))
+    memory = get("mem-per-cpu")
+    scale = {"G": 1e9 * 1.073741824, "M": 1e6 * 1.048576}[memory[-1]]
+    return {"nodes": int(get("nodes")), "per_node": int(get("ntasks-per-node")),
+            "time_s": hours * 3600 + minutes * 60 + seconds,
+            "memory": float(memory[:-1]) * scale}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--solve-worker", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--sizes", type=int, nargs="+", default=[512, 1024, 2048, 4096])
+    parser.add_argument("--solve-size", type=int, default=1024)
+    parser.add_argument("--network-gbs", type=float, default=12.5,
+                        help="network bandwidth per node, GB/s (default: 100 Gb/s)")
+    parser.add_argument("--latency-us", type=float, default=2.0,
+                        help="network message latency, microseconds")
+    parser.add_argument("--cores-per-node", type=int, default=64)
+    parser.add_argument("--iterations", default=json.dumps(ITERATIONS),
+                        help="measured iterations by grid side, JSON")
+    parser.add_argument("--check-slurm", action="store_true")
+    args = parser.parse_args()
+    if args.solve_worker:
+        return solve_worker(args.solve_worker)
+    model = fit(args.sizes, args.solve_size)
+    its_ab = iterations_model({int(k): v for k, v in json.loads(args.iterations).items()})
+    bw, lat = args.network_gbs * 1e9, args.latency_us * 1e-6
+    print("fitted on this machine:")
+    print(f"  c = {model['c']:.3e} s per point and level (1-rank FFT pairs, "
+          f"{', '.join(f'{n}^2 {1e3 * model['floors_1'][n]:.1f} ms' for n in args.sizes)})")
+    print(f"  shared-memory all-to-all: {1e-9 / max(model['inv_bandwidth'], 1e-30):.2f} GB/s per "
+          f"rank, latency {1e6 * model['latency']:.1f} us (2-rank pairs "
+          f"{', '.join(f'{n}^2 {1e3 * model['floors_2'][n]:.1f} ms' for n in args.sizes)})")
+    print(f"  solver passes r = {model['r']:.2e} s per point per iteration, "
+          f"{model['pairs_per_it']:.2f} FFT pairs per iteration "
+          f"({args.solve_size}^2 solve: {model['solve']['iterations']} iterations, "
+          f"{model['solve']['time']:.2f} s)")
+    print(f"  iterations = {its_ab[0]:.1f} + {its_ab[1]:.3f} log2(n)^2")
+    print("\nchecked against this machine (model vs measured floor pair, 2 ranks):")
+    for n in args.sizes:
+        m = pair_time(n, 2, 2, model, bw, lat)
+        print(f"  {n}^2: {1e3 * m:.1f} ms vs {1e3 * model['floors_2'][n]:.1f} ms")
+    print(f"\n65536^2 (the paper's largest), {args.cores_per_node} ranks per node, network "
+          f"{args.network_gbs:g} GB/s and {args.latency_us:g} us per node:")
+    print("| nodes | ranks | iterations | FFT pair s | solve h | memory per rank GB |")
+    print("|---|---|---|---|---|---|")
+    for nodes in (2, 4, 8, 16, 32, 64):
+        p = predict(65536, nodes, args.cores_per_node, model, its_ab, bw, lat)
+        print(f"| {nodes} | {p['ranks']} | {p['iterations']:.0f} | {p['pair_s']:.2f} | "
+              f"{p['solve_s'] / 3600:.2f} | {p['memory_per_rank'] / 1e9:.2f} |")
+    if args.check_slurm:
+        s = slurm_settings(HERE.parent / "runs" / "slurm" / "petgap.sbatch")
+        p = predict(65536, s["nodes"], s["per_node"], model, its_ab, bw, lat)
+        fits_time = p["solve_s"] < s["time_s"]
+        fits_memory = p["memory_per_rank"] < s["memory"]
+        print(f"\nruns/slurm/petgap.sbatch: {s['nodes']} nodes x {s['per_node']} ranks, "
+              f"--time {s['time_s'] / 3600:.1f} h, --mem-per-cpu {s['memory'] / 1e9:.2f} GB: "
+              f"model {p['solve_s'] / 3600:.2f} h ({'fits' if fits_time else 'DOES NOT FIT'}), "
+              f"{p['memory_per_rank'] / 1e9:.2f} GB per rank "
+              f"({'fits' if fits_memory else 'DOES NOT FIT'})")
+
+
+if __name__ == "__main__":
+    main()
