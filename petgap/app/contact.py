@@ -29,8 +29,8 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.analysis.of_solution import contact_statistics_of
-from petgap.mechanics import (ContactProblem, ElasticHalfSpace, ExponentialAdhesion, HardWall,
-                              Load, MeanGap)
+from petgap.mechanics import (ContactProblem, ElasticHalfSpace, ExponentialAdhesion,
+                              FreeHalfSpace, HardWall, Load, MeanGap)
 from petgap.parallel import Grid
 from petgap.solvers import solve
 
@@ -111,7 +111,7 @@ class ContactResult:
 def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.0,
             interaction=None, work_of_adhesion=None, interaction_range=None, comm=None,
             fields="global", tolerance=1e-8, solver="pcg", max_iterations=10000,
-            options=None, planner="estimate"):
+            options=None, planner="estimate", periodic=True):
     """Solve the contact of a rigid rough surface on an elastic half-space in one call.
 
     Collective on ``comm``: every rank calls it with the same arguments.
@@ -124,7 +124,7 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
         the maxima of ``h``.
     pixel_size : float or (float, float)
         ``a0``, or ``(dx, dy)``; positive.  The cell is ``nx dx x ny dy``,
-        periodic.
+        periodic unless ``periodic`` is False.
     load, mean_gap : float
         Exactly one: the mean pressure ``P0`` (positive in compression; ``>= 0``
         for the hard wall, any sign with adhesion) or the mean gap (``> 0``).
@@ -150,6 +150,11 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
         FFTW planner effort of the grid.  ``"estimate"`` plans at once;
         ``"measure"`` plans faster transforms for large or repeated solves and
         caches the wisdom on disk (see :class:`~petgap.parallel.grid.Grid`).
+    periodic : bool
+        Solve the map as a periodic cell (default) or on a free boundary: the map
+        alone on an infinite half-space
+        (:class:`~petgap.mechanics.free_half_space.FreeHalfSpace`), as for a
+        measured map whose edges do not match.
 
     Returns
     -------
@@ -181,8 +186,9 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
         interaction_range, fields))
     nx, ny = heights.shape
     grid = Grid((nx, ny), size=(nx * dx, ny * dy), comm=comm, planner=planner)
-    problem = ContactProblem(grid, grid.local_part(heights).copy(),
-                             ElasticHalfSpace(grid, contact_modulus), interaction)
+    body = ElasticHalfSpace(grid, contact_modulus) if periodic else \
+        FreeHalfSpace(grid, contact_modulus)
+    problem = ContactProblem(grid, grid.local_part(heights).copy(), body, interaction)
     solution = solve(problem, control, solver=solver, tolerance=tolerance,
                      max_iterations=max_iterations, options=options)
     stats = contact_statistics_of(problem, solution)

@@ -133,3 +133,19 @@ def test_measured_map_end_to_end_on_a_free_boundary(comm, mpi_tmp_path, run_cli)
     (row,) = analysis["rows"]
     assert row["rms_slope"] == pytest.approx(step["rms_slope"])
     assert (mpi_tmp_path / "post" / "report.html").exists()
+
+
+def test_one_call_contact_on_a_free_boundary(comm):
+    """petgap.contact(..., periodic=False) is the free solve of the same map."""
+    import petgap
+    from petgap.mechanics.free_half_space import FreeHalfSpace
+    from petgap.parallel.grid import Grid
+    x = np.arange(64) - 32
+    h = -(x[:, None] ** 2 + x[None, :] ** 2) / 400.0
+    result = petgap.contact(h, 1.0, load=1e-3, periodic=False, comm=comm)
+    grid = Grid((64, 64), comm=comm, planner="estimate")
+    direct = petgap.solve(petgap.ContactProblem(grid, h[grid.x_slice], FreeHalfSpace(grid)),
+                          petgap.Load(1e-3))
+    assert result.converged and result.contact_fraction == direct.contact_fraction
+    np.testing.assert_allclose(result.pressure[grid.x_slice], direct.pressure, rtol=0,
+                               atol=1e-12 * np.abs(direct.pressure).max())
