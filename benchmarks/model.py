@@ -2,25 +2,25 @@
 """A performance model of a petgap solve, fitted here, used to plan cluster runs.
 
 One iteration of the default solver (``pcg-pressure``) costs ``k`` FFT pairs (``k`` about
-2.9: ``docs/benchmarks.md``) plus passes over the contact set and the slab, and a few
+2.8-2.9: ``docs/benchmarks.md``) plus passes over the contact set and the slab, and a few
 reductions.  The model:
 
 * **FFT pair** on ``P`` ranks of an ``n x n`` grid (``N = n^2`` points)::
 
-      T_pair(N, P) = c N log2(N) / P  +  4 V(N, P) / B  +  4 (P - 1) l
+      T_pair(N, P) = c N log2(N) / (P e)  +  4 V_off(N, P) C / B_net  +  4 (P - 1) l
 
-  the first term the local 1D transforms (``c``: seconds per point and level, fitted on one
-  rank), the second the four all-to-all transposes of a pair (forward and backward
-  transforms, one transpose each way; ``V = 8 N (P - 1) / P^2`` bytes leave each rank per
-  transpose: the real slab's half-spectrum, 16-byte complex values, ``N / 2`` of them, split
-  into ``P`` pieces), at the bandwidth ``B`` per rank, and the last their message latency
-  ``l``.  On one node ``B`` and ``l`` are the shared-memory ones (``B`` fitted from 2 ranks
-  here); across nodes the bytes bound for other nodes go through the node's network
-  interface, shared by its ``C`` ranks: ``B_net / C`` per rank for the fraction
-  ``(P - C) / (P - 1)`` of the volume (``--network-gbs``, ``--latency-us``: not measurable on
-  this machine, so given, with defaults of a 100 Gb/s InfiniBand node).
+  The first term is the transforms and the on-node transposes: ``c`` (seconds per point
+  and level) is fitted to one-rank pairs at the sizes given, ``e`` is the efficiency of two
+  ranks sharing this machine's memory, ``T_1 / (2 T_2)`` at the largest size (a stand-in
+  for the ranks of a node sharing its memory bandwidth: transforms of large grids are
+  bandwidth-bound).  The second is the four all-to-all transposes' traffic off the node:
+  ``V_off = 8 N (P - 1) / P^2 x (P - C) / (P - 1)`` bytes leave a rank per transpose for
+  other nodes (the half-spectrum, 16-byte complex values, ``N / 2`` of them, in ``P``
+  pieces), ``C`` ranks per node share the node's network bandwidth ``B_net``.  The last is
+  the messages' latency ``l``.  ``B_net`` and ``l`` cannot be measured on one machine:
+  ``--network-gbs`` and ``--latency-us`` give them (defaults: a 100 Gb/s InfiniBand node).
 * **Iteration**: ``t_it = k T_pair + r N / P`` (``r``: the solver's own passes per point,
-  fitted from a measured solve's time per iteration beside the floor on one rank).
+  from a measured one-rank solve's time per iteration beside its floor).
 * **Iterations** of the GUIDE surface grow like ``a + b log2(n)^2`` (fitted to the measured
   counts given with ``--iterations``, the defaults being docs/benchmarks.md's).
 * **Memory per rank**: ``91 MB + 84 B x N / P`` (runs/README.md, "Memory").
@@ -30,7 +30,7 @@ time limit) and says whether the paper's 65536^2 solve fits in it by the model.
 
 Usage::
 
-    python benchmarks/model.py [--sizes 512 1024 2048 4096] [--solve-size 1024]
+    python benchmarks/model.py [--sizes 1024 2048 4096] [--solve-size 2048]
         [--network-gbs 12.5] [--latency-us 2] [--cores-per-node 64] [--check-slurm]
 """
 import argparse
@@ -40,7 +40,6 @@ import os
 import re
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -73,27 +72,25 @@ def solve_worker(n):
 
 
 def fit(sizes, solve_size):
-    """Fit c, B (2 ranks), l and r from floors on 1 and 2 ranks and one solve."""
+    """Fit c and e from floors on 1 and 2 ranks, and r from one solve."""
     from floor import fft_floor
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     one = {n: fft_floor(n, 1) for n in sizes}
     two = {n: fft_floor(n, 2) for n in sizes}
     work = np.array([n * n * math.log2(n * n) for n in sizes])
     c = float(np.dot(work, [one[n] for n in sizes]) / np.dot(work, work))
-    # two ranks: c N log N / 2 + 4 V / B + 4 l, V = 8 N / 4 = 2 N bytes per transpose
-    volume = np.array([4 * 2.0 * n * n for n in sizes])
-    rest = np.array([two[n] - c * n * n * math.log2(n * n) / 2 for n in sizes])
-    design = np.stack([volume, np.full(len(sizes), 4.0)], axis=1)
-    (inv_b, latency), *_ = np.linalg.lstsq(design, rest, rcond=None)
+    largest = max(sizes)
+    efficiency = one[largest] / (2 * two[largest])
     proc = subprocess.run(["mpirun", "-n", "1", sys.executable, __file__, "--solve-worker",
                            str(solve_size)], capture_output=True, text=True, env=env,
                           timeout=3600)
     solve = json.loads(proc.stdout.split("SOLVE ", 1)[1].splitlines()[0])
     per_it = solve["time"] / solve["iterations"]
     pairs = solve["pairs"] / solve["iterations"]
-    r = max(per_it - pairs * one[solve_size], 0.0) / solve_size ** 2
-    return {"c": c, "inv_bandwidth": max(float(inv_b), 0.0), "latency": max(float(latency), 0.0),
-            "r": r, "floors_1": one, "floors_2": two, "solve": solve, "pairs_per_it": pairs}
+    floor = one[solve_size] if solve_size in one else fft_floor(solve_size, 1)
+    r = max(per_it - pairs * floor, 0.0) / solve_size ** 2
+    return {"c": c, "efficiency": efficiency, "r": r, "floors_1": one, "floors_2": two,
+            "solve": solve, "pairs_per_it": pairs}
 
 
 def iterations_model(measured):
@@ -107,16 +104,13 @@ def iterations_model(measured):
 def pair_time(n, ranks, cores_per_node, model, network_bw, network_latency):
     """Model seconds of one FFT pair of n^2 on ``ranks`` ranks, ``cores_per_node`` per node."""
     N = float(n) * n
-    compute = model["c"] * N * math.log2(N) / ranks
     if ranks == 1:
-        return compute
-    volume = 8.0 * N * (ranks - 1) / ranks ** 2          # bytes leaving a rank per transpose
+        return model["c"] * N * math.log2(N)
+    compute = model["c"] * N * math.log2(N) / (ranks * model["efficiency"])
     local = min(cores_per_node, ranks)
-    off_node = (ranks - local) / (ranks - 1)
-    t_local = volume * (1 - off_node) * model["inv_bandwidth"]
-    t_net = volume * off_node * local / network_bw
-    latency = (ranks - 1) * (model["latency"] if off_node == 0 else network_latency)
-    return compute + 4 * (t_local + t_net + latency)
+    off_node = 8.0 * N * (ranks - local) / ranks ** 2     # bytes per rank per transpose
+    latency = (ranks - 1) * network_latency if ranks > local else 0.0
+    return compute + 4 * (off_node * local / network_bw + latency)
 
 
 def predict(n, nodes, cores_per_node, model, its_ab, network_bw, network_latency):
@@ -143,8 +137,8 @@ def slurm_settings(path):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--solve-worker", type=int, help=argparse.SUPPRESS)
-    parser.add_argument("--sizes", type=int, nargs="+", default=[512, 1024, 2048, 4096])
-    parser.add_argument("--solve-size", type=int, default=1024)
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1024, 2048, 4096])
+    parser.add_argument("--solve-size", type=int, default=2048)
     parser.add_argument("--network-gbs", type=float, default=12.5,
                         help="network bandwidth per node, GB/s (default: 100 Gb/s)")
     parser.add_argument("--latency-us", type=float, default=2.0,
@@ -160,20 +154,27 @@ def main():
     its_ab = iterations_model({int(k): v for k, v in json.loads(args.iterations).items()})
     bw, lat = args.network_gbs * 1e9, args.latency_us * 1e-6
     print("fitted on this machine:")
-    print(f"  c = {model['c']:.3e} s per point and level (1-rank FFT pairs, "
-          f"{', '.join(f'{n}^2 {1e3 * model['floors_1'][n]:.1f} ms' for n in args.sizes)})")
-    print(f"  shared-memory all-to-all: {1e-9 / max(model['inv_bandwidth'], 1e-30):.2f} GB/s per "
-          f"rank, latency {1e6 * model['latency']:.1f} us (2-rank pairs "
-          f"{', '.join(f'{n}^2 {1e3 * model['floors_2'][n]:.1f} ms' for n in args.sizes)})")
+    floors_1 = ", ".join(f"{n}^2 {1e3 * model['floors_1'][n]:.1f} ms" for n in args.sizes)
+    floors_2 = ", ".join(f"{n}^2 {1e3 * model['floors_2'][n]:.1f} ms" for n in args.sizes)
+    print(f"  c = {model['c']:.3e} s per point and level (1-rank FFT pairs: {floors_1})")
+    print(f"  e = {model['efficiency']:.2f}, two ranks' efficiency at {max(args.sizes)}^2 "
+          f"(2-rank pairs: {floors_2})")
     print(f"  solver passes r = {model['r']:.2e} s per point per iteration, "
           f"{model['pairs_per_it']:.2f} FFT pairs per iteration "
           f"({args.solve_size}^2 solve: {model['solve']['iterations']} iterations, "
           f"{model['solve']['time']:.2f} s)")
     print(f"  iterations = {its_ab[0]:.1f} + {its_ab[1]:.3f} log2(n)^2")
-    print("\nchecked against this machine (model vs measured floor pair, 2 ranks):")
+    print("\nchecked against this machine (model vs measured floor pair, 1 and 2 ranks):")
     for n in args.sizes:
-        m = pair_time(n, 2, 2, model, bw, lat)
-        print(f"  {n}^2: {1e3 * m:.1f} ms vs {1e3 * model['floors_2'][n]:.1f} ms")
+        print(f"  {n}^2: {1e3 * pair_time(n, 1, 2, model, bw, lat):.1f} vs "
+              f"{1e3 * model['floors_1'][n]:.1f} ms, {1e3 * pair_time(n, 2, 2, model, bw, lat):.1f} "
+              f"vs {1e3 * model['floors_2'][n]:.1f} ms")
+    measured = model["solve"]
+    n = args.solve_size
+    its = measured["iterations"]
+    t = its * (model["pairs_per_it"] * pair_time(n, 1, 2, model, bw, lat) + model["r"] * n * n)
+    print(f"  {n}^2 solve on one rank: model {t:.2f} s vs {measured['time']:.2f} s measured "
+          f"(its {its} iterations; r is fitted to it)")
     print(f"\n65536^2 (the paper's largest), {args.cores_per_node} ranks per node, network "
           f"{args.network_gbs:g} GB/s and {args.latency_us:g} us per node:")
     print("| nodes | ranks | iterations | FFT pair s | solve h | memory per rank GB |")
