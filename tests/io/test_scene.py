@@ -3,6 +3,7 @@
 Every rank parses (rank 0 reads, the result is broadcast) and checks its own copy.
 """
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -93,6 +94,16 @@ def test_default_scene_file_is_valid(comm):
     assert scene.surface.lambda_min == 32.0 and scene.surface.lambda_max == 256.0
     assert scene.control.kind == "load" and scene.control.values == (0.0015,)
     assert scene.path.endswith("default.toml")
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "runs").glob("**/*.toml")),
+                         ids=lambda p: p.name)
+def test_every_scene_in_runs_is_valid(comm, path):
+    """The scenes the docs point to (runs/, runs/slurm/) parse and name the grid their header says."""
+    scene = Scene.from_file(path, comm)
+    header = path.read_text().split("\n[", 1)[0]
+    sizes = {(int(a), int(b)) for a, b in re.findall(r"(\d+) x (\d+)", header)}
+    assert not sizes or scene.grid.shape in sizes, (sizes, scene.grid.shape)
 
 
 def test_unknown_key_suggests_nearest(comm):
