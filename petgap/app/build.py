@@ -159,6 +159,11 @@ def check_options(scene, petsc_args=(), strict=False, log=None):
 #: 87 at 8192^2; a surface-only run holds the FFT buffers and the topography).
 BYTES_PER_POINT_SOLVE = 90
 BYTES_PER_POINT_SURFACE = 40
+#: The same for a free boundary: the hard wall adds the padded cell's FFT buffers and
+#: kernel (181-191 measured, docs/benchmarks.md, "Free boundary beside periodic");
+#: adhesion solves on the cell, four times the map's points.
+BYTES_PER_POINT_FREE = 200
+BYTES_PER_POINT_FREE_ADHESIVE = 4 * BYTES_PER_POINT_SOLVE + BYTES_PER_POINT_FREE
 #: The most points of a rank's (padded) slab: the kernels index it with 32-bit integers.
 MAX_SLAB_POINTS = 2**31 - 1
 
@@ -197,7 +202,8 @@ def check_size(scene, comm, solve=True):
 
     A :class:`~petgap.io.scene.SceneError` naming ``grid.nx``/``grid.ny`` if a
     rank's slab exceeds the kernels' 32-bit index range, or if the estimated
-    peak memory of a rank (:data:`BYTES_PER_POINT_SOLVE` or
+    peak memory of a rank (:data:`BYTES_PER_POINT_SOLVE`, on a free boundary
+    :data:`BYTES_PER_POINT_FREE` or :data:`BYTES_PER_POINT_FREE_ADHESIVE`, or
     :data:`BYTES_PER_POINT_SURFACE` per point of its slab) exceeds what it
     has: its share of the node's MemAvailable or what its address-space
     limit (``ulimit -v``) leaves.  The message gives the estimate, both
@@ -216,6 +222,9 @@ def check_size(scene, comm, solve=True):
             f"rank{'s' if size > 1 else ''} is beyond the {MAX_SLAB_POINTS} points petgap's "
             f"kernels can index; allowed: at most {most_rows} rows of {ny} per rank: {fix}")
     per_point = BYTES_PER_POINT_SOLVE if solve else BYTES_PER_POINT_SURFACE
+    if solve and not scene.surface.periodic:
+        per_point = (BYTES_PER_POINT_FREE if scene.interaction.kind == "hard-wall"
+                     else BYTES_PER_POINT_FREE_ADHESIVE)
     need = rows * ny * per_point
     node = comm.Split_type(MPI.COMM_TYPE_SHARED)
     on_node = node.size

@@ -15,7 +15,8 @@ import pytest
 
 from conftest import clean_env, wait_for_root
 from conftest import write_shared as write
-from petgap.app.build import BYTES_PER_POINT_SOLVE, check_options, check_size
+from petgap.app.build import (BYTES_PER_POINT_FREE, BYTES_PER_POINT_SOLVE, check_options,
+                              check_size)
 from petgap.io.scene import Scene, SceneError
 from petgap.solvers.tao import check_petsc_options
 
@@ -133,6 +134,11 @@ def test_memory_estimate_refuses_what_cannot_fit(comm):
     assert "MemAvailable" in message and "more ranks" in message and "smaller grid" in message
     small = Scene.from_text(SCENE.format(solver=""), comm)
     assert check_size(small, comm) == 32 * 32 // comm.size * BYTES_PER_POINT_SOLVE
+    # a free boundary adds the padded cell (and solves adhesion on it)
+    text = SCENE.format(solver="")
+    assert "[surface]\n" in text
+    free = Scene.from_text(text.replace("[surface]\n", "[surface]\nperiodic = false\n"), comm)
+    assert check_size(free, comm) == 32 * 32 // comm.size * BYTES_PER_POINT_FREE
 
 
 def test_memory_refusal_under_an_address_space_limit(comm, mpi_tmp_path):
