@@ -24,6 +24,9 @@ def main(path):
     data = json.loads(open(path).read())
     rows = data["rows"]
     references = {(r["file"], r["step"]): r for r in rows}
+    # with --reference, one non-adhesive row serves every adhesive step
+    hard = [r for r in rows if r.get("interaction") != "exponential"]
+    common = hard[0] if len(hard) == 1 else None
     by_gap = {(f["file"], f["step"]): f for f in data["force_by_gap"]}
     print("| file | rho / a0 | w / (E* a0) | g0 / a0 | rho / g0 | 1/kappa_att | in contact | "
           "g < 0.1 g0 | g >= 0.1 g0 | Eq. 16 printed | Eq. 16 exact | exact / non-contact | "
@@ -32,7 +35,7 @@ def main(path):
     for r in rows:
         if r.get("interaction") != "exponential" or (r["file"], r["step"]) not in by_gap:
             continue
-        reference = references.get((r["file"], r["reference_step"]), r)
+        reference = references.get((r["file"], r["reference_step"]), common or r)
         g0 = reference["g0"]
         f = by_gap[(r["file"], r["step"])]
         width = math.log(f["x"][1] / f["x"][0])
