@@ -72,10 +72,12 @@ def main():
         ax.grid(True, which="major", lw=0.3, alpha=0.5)
         handles = [Line2D([], [], ls="", marker="o", color=colours[r], label=f"{r}")
                    for r in ratios if any(s["ratio"] == r for s in data)]
-        handles += [Line2D([], [], ls="", marker="o", color="0.3", label=r"$\lambda_{min} = 32\,a_0$"),
-                    Line2D([], [], ls="", marker="o", color="0.3", fillstyle="none",
-                           label=r"$\lambda_{min} = 128\,a_0$"),
-                    Line2D([], [], ls="--", color="k", label="Eq. 13: $(g/g_0)^{-1/3}$")]
+        handles.append(Line2D([], [], ls="", marker="o", color="0.3",
+                              label=r"$\lambda_{min} = 32\,a_0$"))
+        if any(s["lmin"] != 32 for s in data):
+            handles.append(Line2D([], [], ls="", marker="o", color="0.3", fillstyle="none",
+                                  label=r"$\lambda_{min} = 128\,a_0$"))
+        handles.append(Line2D([], [], ls="--", color="k", label="Eq. 13: $(g/g_0)^{-1/3}$"))
         ax.legend(handles=handles, title=r"$\lambda_{max}/\lambda_{min}$", fontsize=8,
                   title_fontsize=8, loc="lower left", ncol=2)
     axes[0].set_ylabel(r"$p(g)\,/\,(2\pi c/3g_0)$, $p$ normalised to $1-c$")
