@@ -23,7 +23,11 @@ to .npy, and solved
   (contact set, work arrays), the first transform, and the assembly of the
   result (derived quantities, the elastic energy's transform, TAO's solution
   vector).  "s / it" is on that time too, and "total s" includes the start
-  ("start s", the coarse-grid solve of a cold ``pcg-pressure`` solve);
+  ("start s", the coarse-grid solve of a cold ``pcg-pressure`` solve, with the
+  planning of its grids).  "floor pairs to solution" is the whole solve in
+  floor pairs: "total s" over the floors measured around it (median over the
+  rounds), i.e. the cost from problem to converged solution in units of the
+  machine's transform pair;
 * by Tamaas 2.9 ``PolonskyKeerRey`` (pressure primal, same load, tolerance
   1e-8) in a throwaway venv of the default Python (created on first use), whose
   solution is then judged by petgap's KKT metric so both stop at the same
@@ -212,9 +216,10 @@ def main():
         return worker(args)
 
     print(f"| N | ranks | solver | iterations | FFT pairs / it | s / it | FFT floor s | "
-          f"evaluation / floor | operator / floor | rest | solve / floor | start s | total s | c | kkt | "
+          f"evaluation / floor | operator / floor | rest | solve / floor | start s | total s | "
+          f"floor pairs to solution | c | kkt | "
           "bytes / point | Tamaas its | Tamaas s | Tamaas kkt | time ratio |")
-    print("|" + "---|" * 20)
+    print("|" + "---|" * 21)
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.sizes:
             surface = Path(tmp) / f"h{n}.npy"
@@ -253,6 +258,7 @@ def main():
                 solve_ratio = statistics.median(
                     iterating(r) / max(r["operator_applications"], 1) / f
                     for r, f in zip(runs, around))
+                to_solution = statistics.median(r["wall_time"] / f for r, f in zip(runs, around))
                 # the same on the iterations' span: [seconds, operator seconds, applications]
                 loops = [(r["loop"], f) for r, f in zip(runs, around) if r.get("loop")]
                 if loops:
@@ -286,6 +292,7 @@ def main():
                          else "- | - | ")  # solvers that do not use these operators
                       + f"{solve_ratio:.2f} | "
                       + f"{res.get('start_time', 0.0):.2f} | {res['wall_time']:.2f} | "
+                      + f"{to_solution:.0f} | "
                       f"{res['contact_fraction']:.4f} | {kkt:.1e} | {res['bytes_per_point']:.0f} | "
                       + " | ".join(t_cols) + " |", flush=True)
 

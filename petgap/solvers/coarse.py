@@ -7,12 +7,18 @@ than a late one; and a start nearer the answer built from the geometry alone
 (a rigid approach) proved unstable (see :mod:`petgap.solvers.pressure_cg`).  The
 answer of the same contact on a grid ``f`` times coarser -- the topography
 averaged over ``f x f`` blocks, the same cell, modulus and control -- is such a
-start, and costs ``1/f^2`` per iteration.  Its pressure, repeated over each
+start, and costs ``1/f^2`` per iteration.  ``f = 2``: a start twice as coarse
+leaves the fine solve fewer contact edges to move than one four times as
+coarse, and the levels below cost a third of the first in all.  Its pressure, repeated over each
 block, starts the fine solve with the set already at the contact fraction of
 the answer, which takes a third or more of the iterations off a cold solve
 (docs/benchmarks.md has the current figures).  The coarse problem is solved
 the same way (:func:`petgap.solvers.pressure_cg.coarse_start_pressure` drives it), so
-large grids descend through several levels (1024^2: 256^2, 64^2, 32^2).
+large grids descend through several levels (1024^2: 512^2, 256^2, ..., 32^2).
+The coarse problem is made for the start and dropped after it (the later
+steps of a sweep start warm), so that it never adds to the fine solve's peak
+memory; its transforms are planned with FFTW's "estimate", so that a first
+run of a size does not spend longer planning the levels than solving on them.
 
 This module holds the coarse problem and the transfers between the grids
 only; it does not solve, so the solver may import it without a cycle.
@@ -48,42 +54,35 @@ COARSE_TOLERANCE = 1e-4
 
 
 def coarsening_factor(shape):
-    """The block size ``f`` (4 or 2) for a grid of this shape, or None.
+    """The block size ``f`` (2) for a grid of this shape, or None.
 
     Depends on the shape alone, so every rank count decides alike.
     """
     nx, ny = shape
-    for f in (4, 2):
-        if nx % f == 0 and ny % f == 0 and min(nx, ny) // f >= MIN_SIDE:
-            return f
+    f = 2
+    if nx % f == 0 and ny % f == 0 and min(nx, ny) // f >= MIN_SIDE:
+        return f
     return None
 
 
 def coarse_problem(problem):
-    """The block-averaged problem on the coarse grid, made once and kept; None if none.
+    """The block-averaged problem on the coarse grid, or None if the shape has none.
 
-    Collective.  Kept by ``problem`` (:meth:`~petgap.mechanics.problem.ContactProblem.derived`)
-    so that the steps of a sweep share it; about ``1/f^2`` of the fine
-    problem's memory.
+    Collective.  Made anew on every call (the caller drops it after the start);
+    about ``1/f^2`` of the fine problem's memory.
     """
-    return problem.derived("coarse problem", lambda: _make_coarse_problem(problem))
-
-
-def _make_coarse_problem(problem):
     grid = problem.grid
     f = coarsening_factor(grid.shape)
     if f is None:
         return None
     try:
         cgrid = Grid((grid.nx // f, grid.ny // f), size=(grid.Lx, grid.Ly), comm=grid.comm,
-                     planner=grid.planner, wisdom=grid.wisdom)
+                     planner="estimate", wisdom=grid.wisdom)
     except DecompositionError:
         return None  # too few coarse rows for this many ranks: no coarse start
-    # said once per problem, where it was spent: the first run of a size plans with
-    # "measure" (seconds at 4096^2), later runs read the wisdom cache
-    get_logger("coarse").info("coarse grid %dx%d for the start: FFTs planned in %.2f s (%s%s)",
-                              cgrid.nx, cgrid.ny, cgrid.planning_time, cgrid.planner,
-                              ", wisdom cached" if cgrid.wisdom else "")
+    # where the set-up time goes, level by level
+    get_logger("coarse").info("coarse grid %dx%d for the start: FFTs planned in %.2f s (%s)",
+                              cgrid.nx, cgrid.ny, cgrid.planning_time, cgrid.planner)
     h = restrict(grid, cgrid, problem.topography, f)
     return ContactProblem(cgrid, h, problem.half_space.on_grid(cgrid),
                           problem.interaction)

@@ -28,6 +28,23 @@ boundary integral equations (Steinbach & Wendland, Adv. Comput. Math. 9 (1998)
 price of a third transform pair per iteration (two once the contact set has
 settled, see below).
 
+Restarts (petgap's change to the method)
+----------------------------------------
+Polonsky and Keer restart the conjugate gradients whenever a point enters
+``S``.  Past the first few iterations of a start from a coarser grid, a few
+points enter at almost every iteration -- the contact edges move by a pixel
+here and there -- so the method degrades to preconditioned steepest descent
+while the edges settle, the phase that dominates on large grids.  Here
+conjugacy is kept unless more than :data:`RESTART_FRACTION` of ``S`` enters in
+one iteration: the few entering points perturb the subspace the directions
+were conjugate in, and the step's exact line search still minimises along
+the new direction.  A direction that is not a descent direction, ``(g, t) <=
+0``, is caught after its transform and replaced by the steepest one.  The
+fraction is a tuning constant: docs/benchmarks.md ("Restarts") has the
+iteration counts for it, its neighbours and Polonsky and Keer's rule, and
+``benchmarks/robustness.py`` checks that every solve of the robustness set
+still converges.
+
 When an iteration changes no point of the contact set (no projection, no
 point enters), ``K^{-1} p`` follows ``p`` by the conjugate-gradient recurrence
 ``u <- s (u - tau r)`` and the next fresh transform is skipped; a fresh
@@ -72,6 +89,11 @@ from petgap.solvers import _contact_set as _cs
 from petgap.solvers import coarse
 from petgap.solvers.contact_set import INDEX, ContactSet
 from petgap.solvers.convergence import Timer, judge
+
+#: Conjugacy is dropped (a steepest-descent restart) when more points than this
+#: fraction of the contact set enter it in one iteration; see "Restarts" in the
+#: module docstring.  0 is Polonsky and Keer's own rule.
+RESTART_FRACTION = 0.003
 
 
 def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
@@ -278,16 +300,24 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # Rayleigh quotient (g, K g) / (g, g) of the stiffness on the gap.
             stiffness = gz / g_sq if g_sq > 0 else 0.0
             g_norm = gz
-            _cs.direction(zS, zshift, delta * g_norm / g_old, tS)
+            zS_, zshift_ = zS, zshift
         else:
             g_norm = global_sums(comm, g_norm)[0]
             stiffness = 1.0
-            _cs.direction(gS, 0.0, delta * g_norm / g_old, tS)
+            zS_, zshift_ = gS, 0.0
+        beta = delta * g_norm / g_old
         g_old = g_norm
-        # The image r = K^{-1} t of the direction: one transform pair, from S
-        # to the whole slab (the recurrence below needs r everywhere)
-        half_space.apply_sparse(pidx, tS, inverse=True)
-        sum_r, sum_gt, sum_rt, sum_t = global_sums(comm, *_cs.step_sums(padded, pidx, gS, tS))
+        while True:
+            _cs.direction(zS_, zshift_, beta, tS)
+            # The image r = K^{-1} t of the direction: one transform pair, from S
+            # to the whole slab (the recurrence below needs r everywhere)
+            half_space.apply_sparse(pidx, tS, inverse=True)
+            sum_r, sum_gt, sum_rt, sum_t = global_sums(comm,
+                                                       *_cs.step_sums(padded, pidx, gS, tS))
+            if sum_gt > 0 or beta == 0.0:
+                break
+            # S changed since the last restart, so t need not descend: restart
+            beta = 0.0
         if load:
             sum_rt -= sum_r / n_contact * sum_t  # r minus its mean over S
         if not sum_rt > 0:
@@ -300,7 +330,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             added_p = np.empty(len(added))
             sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau * stiffness, added_p)
         n_overlap, n_clipped, sum_p = global_sums(comm, entering + len(added), clipped, sum_p)
-        delta = 0.0 if n_overlap > 0 else 1.0
+        delta = 0.0 if n_overlap > RESTART_FRACTION * n_contact else 1.0
         scale = target * n / sum_p if load else 1.0
         if clipped or len(added):
             del idx, pidx, pS, tS, gS  # views of buffers merge may replace
