@@ -22,8 +22,33 @@ They are 32-bit (``numpy.int32``), which halves their share of the set's
 memory; :class:`petgap.solvers.contact_set.ContactSet` refuses slabs with 2^31 padded
 points or more (on one rank, some 17 GB per field).
 
+Precision: the fields (topography ``h``, displacement ``u``, the FFT buffer
+``pad``, and the vectors on S: ``pS, tS, gS, zS``, ``added_p``, ``out``) are
+either all ``float64`` or all ``float32`` in one call (``real_t``; single
+precision halves the memory and the bandwidth of the passes, which is what they
+cost).  Mixing the two raises a ``TypeError`` naming the arrays, rather than
+converting a field behind the caller's back.  Scalars (``offset``, ``shift``,
+``tau``, ...) are always ``double``, and so is the arithmetic: each value is
+computed in double from the fields' values and, where a kernel stores it in a
+``float32`` array, rounded once, explicitly, on the way in.  Sums and extrema
+are accumulated and returned in double; where a kernel stores the values it
+sums, it sums them as stored, so that a returned sum describes the array the
+caller holds (e.g. ``sum pS`` after :func:`update`, which restores the load).
+A ``float32`` call thus gives the ``float64`` call on the same data rounded to
+``float32``, to within that one rounding per stored value.  In the ``float64``
+path the casts change nothing: it computes what plain ``double`` kernels do,
+bit for bit.
+
 Every function works on this rank's data only and returns partial sums or
 extrema for the caller to reduce over MPI.
+
+Implementation: Cython 0.29 cannot declare ``const`` memoryviews of a fused
+type as arguments (the compiler crashes), and the read-only inputs must stay
+``const`` so that read-only arrays (a memory-mapped topography) are accepted.
+Each kernel is therefore a ``def`` that checks the precision of its fields and
+calls one of the two specialisations of a ``cdef`` implementation, which takes
+the fields as objects and views them as typed (``const``) memoryviews locally;
+its first argument (``real_t kind``, a zero) only selects the specialisation.
 """
 import numpy as np
 
@@ -31,34 +56,85 @@ from libc.string cimport memset
 
 ctypedef int index_t  # numpy.int32: flat indices into one rank's (padded) slab
 
+ctypedef fused real_t:  # the precision of the fields of one call
+    float
+    double
 
-def gather_gap(const double[:, ::1] src, const index_t[::1] sidx, const double[:, ::1] h,
-               const index_t[::1] idx, double offset, double[::1] gS):
+_FLOAT64 = np.dtype(np.float64)
+_FLOAT32 = np.dtype(np.float32)
+
+
+cdef bint _single(str kernel, str names, tuple fields) except -1:
+    """True if the ``fields`` of ``kernel`` are all float32, False if all float64.
+
+    Raises a ``TypeError`` naming each field's dtype otherwise: Cython's own
+    check would report a "buffer dtype mismatch" (a ``ValueError``) on whichever
+    field it converts second, without saying which precision the call was meant
+    to have.
+    """
+    cdef Py_ssize_t singles = 0, doubles = 0
+    dtypes = []
+    for field in fields:
+        dtype = getattr(field, "dtype", None)
+        if dtype is None:
+            dtype = np.asarray(field).dtype
+        if dtype is _FLOAT64 or dtype == _FLOAT64:
+            doubles += 1
+        elif dtype is _FLOAT32 or dtype == _FLOAT32:
+            singles += 1
+        dtypes.append(dtype)
+    if singles == 0 and doubles == len(fields):
+        return False
+    if doubles == 0 and singles == len(fields):
+        return True
+    described = ", ".join(f"{name} {dtype}" for name, dtype in zip(names.split(), dtypes))
+    raise TypeError(f"{kernel}: the field arrays must be all float64 or all float32 "
+                    f"(one precision per call), got {described}")
+
+
+def gather_gap(src, const index_t[::1] sidx, h, const index_t[::1] idx, double offset, gS):
     """``gS = src - h + offset`` on S (``src`` indexed by ``sidx``); returns ``sum gS``."""
+    if _single("gather_gap", "src h gS", (src, h, gS)):
+        return _gather_gap[float](0, src, sidx, h, idx, offset, gS)
+    return _gather_gap[double](0, src, sidx, h, idx, offset, gS)
+
+
+cdef object _gather_gap(real_t kind, object src_, const index_t[::1] sidx, object h_,
+                        const index_t[::1] idx, double offset, object gS_):
+    cdef const real_t[:, ::1] src = src_
+    cdef const real_t[:, ::1] h = h_
+    cdef real_t[::1] gS = gS_
     cdef Py_ssize_t k, ns = idx.shape[0]
     cdef double v, s = 0.0
-    cdef const double *sf
-    cdef const double *hf
+    cdef const real_t *sf
+    cdef const real_t *hf
     if ns == 0:
         return 0.0
     sf = &src[0, 0]
     hf = &h[0, 0]
     with nogil:
         for k in range(ns):
-            v = sf[sidx[k]] - hf[idx[k]] + offset
-            gS[k] = v
+            v = <real_t>(<double>sf[sidx[k]] - <double>hf[idx[k]] + offset)
+            gS[k] = <real_t>v
             s += v
     return s
 
 
-def shift_and_norms(double[::1] gS, double shift):
+def shift_and_norms(gS, double shift):
     """``gS -= shift``; returns ``(max |gS|, sum gS^2)``: the in-contact gap residual."""
+    if _single("shift_and_norms", "gS", (gS,)):
+        return _shift_and_norms[float](0, gS, shift)
+    return _shift_and_norms[double](0, gS, shift)
+
+
+cdef object _shift_and_norms(real_t kind, object gS_, double shift):
+    cdef real_t[::1] gS = gS_
     cdef Py_ssize_t k, ns = gS.shape[0]
     cdef double v, a, in_max = 0.0, norm = 0.0
     with nogil:
         for k in range(ns):
-            v = gS[k] - shift
-            gS[k] = v
+            v = <real_t>(<double>gS[k] - shift)
+            gS[k] = <real_t>v
             norm += v * v
             a = v if v >= 0.0 else -v
             if a > in_max:
@@ -68,8 +144,7 @@ def shift_and_norms(double[::1] gS, double shift):
     return in_max, norm
 
 
-def gap_pass(const double[:, ::1] src, const double[:, ::1] h, const unsigned char[:, ::1] mask,
-             double offset, index_t[::1] overlap):
+def gap_pass(src, h, const unsigned char[:, ::1] mask, double offset, index_t[::1] overlap):
     """The one full pass of an iteration, over the gap ``g = src - h + offset``.
 
     ``src`` holds the displacement in the padded layout (only its first
@@ -86,12 +161,21 @@ def gap_pass(const double[:, ::1] src, const double[:, ::1] h, const unsigned ch
     (counts only); only rows with penetrating points off S are swept again,
     from cache, to record them.
     """
+    if _single("gap_pass", "src h", (src, h)):
+        return _gap_pass[float](0, src, h, mask, offset, overlap)
+    return _gap_pass[double](0, src, h, mask, offset, overlap)
+
+
+cdef object _gap_pass(real_t kind, object src_, object h_, const unsigned char[:, ::1] mask,
+                      double offset, index_t[::1] overlap):
+    cdef const real_t[:, ::1] src = src_
+    cdef const real_t[:, ::1] h = h_
     cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1], cap = overlap.shape[0]
     cdef Py_ssize_t count = 0
     cdef long row_negative, row_nan, nan_total = 0
     cdef double v, pen = 0.0
-    cdef const double *sr
-    cdef const double *hr
+    cdef const real_t *sr
+    cdef const real_t *hr
     cdef const unsigned char *mr
     if src.shape[0] != m or src.shape[1] < n or mask.shape[0] != m or mask.shape[1] != n:
         raise ValueError("gap_pass: src, h and mask do not describe the same slab")
@@ -103,13 +187,13 @@ def gap_pass(const double[:, ::1] src, const double[:, ::1] h, const unsigned ch
             row_negative = 0
             row_nan = 0
             for j in range(n):
-                v = sr[j] - hr[j] + offset
+                v = <double>sr[j] - <double>hr[j] + offset
                 row_negative += (mr[j] == 0) & (v < 0.0)
                 row_nan += v != v
             nan_total += row_nan
             if row_negative:
                 for j in range(n):
-                    v = sr[j] - hr[j] + offset
+                    v = <double>sr[j] - <double>hr[j] + offset
                     if mr[j] == 0 and v < 0.0:
                         if count < cap:
                             overlap[count] = i * n + j
@@ -121,64 +205,109 @@ def gap_pass(const double[:, ::1] src, const double[:, ::1] h, const unsigned ch
     return pen, count
 
 
-def collect_overlap(const double[:, ::1] u, const double[:, ::1] h,
-                    const unsigned char[:, ::1] mask, double offset, index_t[::1] overlap):
+def collect_overlap(u, h, const unsigned char[:, ::1] mask, double offset,
+                    index_t[::1] overlap):
     """Flat indices of the points off S with ``u - h + offset < 0``; returns their number.
 
     ``u`` may be padded (only its first ``h.shape[1]`` columns are read).
     """
+    if _single("collect_overlap", "u h", (u, h)):
+        return _collect_overlap[float](0, u, h, mask, offset, overlap)
+    return _collect_overlap[double](0, u, h, mask, offset, overlap)
+
+
+cdef object _collect_overlap(real_t kind, object u_, object h_,
+                             const unsigned char[:, ::1] mask, double offset,
+                             index_t[::1] overlap):
+    cdef const real_t[:, ::1] u = u_
+    cdef const real_t[:, ::1] h = h_
     cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1], cap = overlap.shape[0]
     cdef Py_ssize_t count = 0
     with nogil:
         for i in range(m):
             for j in range(n):
-                if not mask[i, j] and u[i, j] - h[i, j] + offset < 0.0:
+                if not mask[i, j] and <double>u[i, j] - <double>h[i, j] + offset < 0.0:
                     if count < cap:
                         overlap[count] = i * n + j
                     count += 1
     return count
 
 
-def z_sums(const double[::1] zS, const double[::1] gS):
+def z_sums(zS, gS):
     """Returns ``(sum z, sum g z)`` over S: ``z`` the preconditioned gap on S."""
+    if _single("z_sums", "zS gS", (zS, gS)):
+        return _z_sums[float](0, zS, gS)
+    return _z_sums[double](0, zS, gS)
+
+
+cdef object _z_sums(real_t kind, object zS_, object gS_):
+    cdef const real_t[::1] zS = zS_
+    cdef const real_t[::1] gS = gS_
     cdef Py_ssize_t k, ns = zS.shape[0]
     cdef double z, sz = 0.0, sgz = 0.0
     with nogil:
         for k in range(ns):
             z = zS[k]
             sz += z
-            sgz += gS[k] * z
+            sgz += <double>gS[k] * z
     return sz, sgz
 
 
-def direction(const double[::1] zS, double zshift, double beta, double[::1] tS):
+def direction(zS, double zshift, double beta, tS):
     """``tS = (zS - zshift) + beta tS``: the conjugate direction on S."""
+    if _single("direction", "zS tS", (zS, tS)):
+        _direction[float](0, zS, zshift, beta, tS)
+    else:
+        _direction[double](0, zS, zshift, beta, tS)
+
+
+cdef object _direction(real_t kind, object zS_, double zshift, double beta, object tS_):
+    cdef const real_t[::1] zS = zS_
+    cdef real_t[::1] tS = tS_
     cdef Py_ssize_t k, ns = tS.shape[0]
     with nogil:
         for k in range(ns):
-            tS[k] = zS[k] - zshift + beta * tS[k]
+            tS[k] = <real_t>(<double>zS[k] - zshift + beta * <double>tS[k])
 
 
-def direction_from_buffer(const double[:, ::1] pad, const index_t[::1] pidx, double zshift,
-                          double beta, double[::1] tS):
+def direction_from_buffer(pad, const index_t[::1] pidx, double zshift, double beta, tS):
     """``tS = (pad - zshift) + beta tS`` on S: :func:`direction` reading ``z`` where
     the preconditioner left it, so that no vector of S is spent on holding it."""
+    if _single("direction_from_buffer", "pad tS", (pad, tS)):
+        _direction_from_buffer[float](0, pad, pidx, zshift, beta, tS)
+    else:
+        _direction_from_buffer[double](0, pad, pidx, zshift, beta, tS)
+
+
+cdef object _direction_from_buffer(real_t kind, object pad_, const index_t[::1] pidx,
+                                   double zshift, double beta, object tS_):
+    cdef const real_t[:, ::1] pad = pad_
+    cdef real_t[::1] tS = tS_
     cdef Py_ssize_t k, ns = tS.shape[0]
-    cdef const double *pf
+    cdef const real_t *pf
     if ns == 0:
         return
     pf = &pad[0, 0]
     with nogil:
         for k in range(ns):
-            tS[k] = pf[pidx[k]] - zshift + beta * tS[k]
+            tS[k] = <real_t>(<double>pf[pidx[k]] - zshift + beta * <double>tS[k])
 
 
-def step_sums(const double[:, ::1] pad, const index_t[::1] pidx, const double[::1] gS,
-              const double[::1] tS):
+def step_sums(pad, const index_t[::1] pidx, gS, tS):
     """Returns ``(sum r, sum g t, sum r t, sum t)`` over S with ``r = pad = K^{-1} P_S t``."""
+    if _single("step_sums", "pad gS tS", (pad, gS, tS)):
+        return _step_sums[float](0, pad, pidx, gS, tS)
+    return _step_sums[double](0, pad, pidx, gS, tS)
+
+
+cdef object _step_sums(real_t kind, object pad_, const index_t[::1] pidx, object gS_,
+                       object tS_):
+    cdef const real_t[:, ::1] pad = pad_
+    cdef const real_t[::1] gS = gS_
+    cdef const real_t[::1] tS = tS_
     cdef Py_ssize_t k, ns = pidx.shape[0]
     cdef double r, t, sr = 0.0, sgt = 0.0, srt = 0.0, st = 0.0
-    cdef const double *pf
+    cdef const real_t *pf
     if ns == 0:
         return 0.0, 0.0, 0.0, 0.0
     pf = &pad[0, 0]
@@ -187,39 +316,49 @@ def step_sums(const double[:, ::1] pad, const index_t[::1] pidx, const double[::
             r = pf[pidx[k]]
             t = tS[k]
             sr += r
-            sgt += gS[k] * t
+            sgt += <double>gS[k] * t
             srt += r * t
             st += t
     return sr, sgt, srt, st
 
 
-def update(double[::1] pS, const double[::1] tS, const double[::1] gS, double tau,
-           double entry):
+def update(pS, tS, gS, double tau, double entry):
     """``pS = max(pS - tau tS, 0)``, or ``-entry gS`` where that is <= 0 and ``gS < 0``.
 
     ``entry`` turns a penetration into a pressure (see :func:`overlap_pressures`).
+    The test ``<= 0`` is made on the value as stored, so that in single
+    precision a pressure that rounds to zero counts as clipped (and leaves S
+    at the next merge) instead of staying in S at zero.
 
     Returns ``(points of S re-entering by overlap, points of S clipped, sum pS)``.
     """
+    if _single("update", "pS tS gS", (pS, tS, gS)):
+        return _update[float](0, pS, tS, gS, tau, entry)
+    return _update[double](0, pS, tS, gS, tau, entry)
+
+
+cdef object _update(real_t kind, object pS_, object tS_, object gS_, double tau, double entry):
+    cdef real_t[::1] pS = pS_
+    cdef const real_t[::1] tS = tS_
+    cdef const real_t[::1] gS = gS_
     cdef Py_ssize_t k, ns = pS.shape[0]
     cdef double v, total = 0.0
     cdef long clipped = 0, overlap = 0
     with nogil:
         for k in range(ns):
-            v = pS[k] - tau * tS[k]
+            v = <real_t>(<double>pS[k] - tau * <double>tS[k])
             if v <= 0.0:
                 clipped += 1
                 v = 0.0
                 if gS[k] < 0.0:
-                    v = -entry * gS[k]
+                    v = <real_t>(-entry * <double>gS[k])
                     overlap += 1
-            pS[k] = v
+            pS[k] = <real_t>v
             total += v
     return overlap, clipped, total
 
 
-def overlap_pressures(const double[:, ::1] u, const double[:, ::1] h, const index_t[::1] points,
-                      double offset, double entry, double[::1] out):
+def overlap_pressures(u, h, const index_t[::1] points, double offset, double entry, out):
     """``out = -entry g`` at the overlap points off S, ``g = u - h + offset``; returns the sum.
 
     ``points`` are flat indices into ``h``'s unpadded slab; ``u`` may be
@@ -227,10 +366,20 @@ def overlap_pressures(const double[:, ::1] u, const double[:, ::1] h, const inde
     caller chooses it so that a penetration becomes a pressure of the right
     scale.
     """
+    if _single("overlap_pressures", "u h out", (u, h, out)):
+        return _overlap_pressures[float](0, u, h, points, offset, entry, out)
+    return _overlap_pressures[double](0, u, h, points, offset, entry, out)
+
+
+cdef object _overlap_pressures(real_t kind, object u_, object h_, const index_t[::1] points,
+                               double offset, double entry, object out_):
+    cdef const real_t[:, ::1] u = u_
+    cdef const real_t[:, ::1] h = h_
+    cdef real_t[::1] out = out_
     cdef Py_ssize_t k, q, np_ = points.shape[0], n = h.shape[1], w = u.shape[1]
     cdef double v, s = 0.0
-    cdef const double *uf
-    cdef const double *hf
+    cdef const real_t *uf
+    cdef const real_t *hf
     if np_ == 0:
         return 0.0
     uf = &u[0, 0]
@@ -238,14 +387,14 @@ def overlap_pressures(const double[:, ::1] u, const double[:, ::1] h, const inde
     with nogil:
         for k in range(np_):
             q = points[k]
-            v = -entry * (uf[(q // n) * w + q % n] - hf[q] + offset)
-            out[k] = v
+            v = <real_t>(-entry * (<double>uf[(q // n) * w + q % n] - <double>hf[q] + offset))
+            out[k] = <real_t>v
             s += v
     return s
 
 
-def merge(index_t[::1] idx, index_t[::1] pidx, double[::1] pS, double[::1] tS, Py_ssize_t size,
-          const index_t[::1] added, const double[::1] added_p, unsigned char[:, ::1] mask,
+def merge(index_t[::1] idx, index_t[::1] pidx, pS, tS, Py_ssize_t size,
+          const index_t[::1] added, added_p, unsigned char[:, ::1] mask,
           Py_ssize_t padded_width):
     """The new contact set, in place: points of S with ``pS > 0`` merged with the added points.
 
@@ -264,6 +413,17 @@ def merge(index_t[::1] idx, index_t[::1] pidx, double[::1] pS, double[::1] tS, P
     takes would otherwise cost a pass over the whole set, which matters while
     the set is large (the first iterations of a cold start).
     """
+    if _single("merge", "pS tS added_p", (pS, tS, added_p)):
+        return _merge[float](0, idx, pidx, pS, tS, size, added, added_p, mask, padded_width)
+    return _merge[double](0, idx, pidx, pS, tS, size, added, added_p, mask, padded_width)
+
+
+cdef object _merge(real_t kind, index_t[::1] idx, index_t[::1] pidx, object pS_, object tS_,
+                   Py_ssize_t size, const index_t[::1] added, object added_p_,
+                   unsigned char[:, ::1] mask, Py_ssize_t padded_width):
+    cdef real_t[::1] pS = pS_
+    cdef real_t[::1] tS = tS_
+    cdef const real_t[::1] added_p = added_p_
     cdef Py_ssize_t ns = size, na = added.shape[0]
     cdef Py_ssize_t n = mask.shape[1], a, k, kept = 0, w, extra = 0
     cdef unsigned char *mf
@@ -319,15 +479,24 @@ def merge(index_t[::1] idx, index_t[::1] pidx, double[::1] pS, double[::1] tS, P
     return kept + extra
 
 
-def recurrence(double[:, ::1] u, const double[:, ::1] pad, double tau, double scale,
-               Py_ssize_t columns):
+def recurrence(u, pad, double tau, double scale, Py_ssize_t columns):
     """``u = scale (u - tau r)`` with ``r = pad``, on the first ``columns`` columns.
 
     The displacement of the updated pressure, both fields in the padded layout.
     """
+    if _single("recurrence", "u pad", (u, pad)):
+        _recurrence[float](0, u, pad, tau, scale, columns)
+    else:
+        _recurrence[double](0, u, pad, tau, scale, columns)
+
+
+cdef object _recurrence(real_t kind, object u_, object pad_, double tau, double scale,
+                        Py_ssize_t columns):
+    cdef real_t[:, ::1] u = u_
+    cdef const real_t[:, ::1] pad = pad_
     cdef Py_ssize_t i, j, m = u.shape[0]
-    cdef double *ur
-    cdef const double *rr
+    cdef real_t *ur
+    cdef const real_t *rr
     if pad.shape[0] != m or columns > u.shape[1] or columns > pad.shape[1]:
         raise ValueError("recurrence: u and pad do not describe the same slab")
     with nogil:
@@ -335,7 +504,7 @@ def recurrence(double[:, ::1] u, const double[:, ::1] pad, double tau, double sc
             ur = &u[i, 0]
             rr = &pad[i, 0]
             for j in range(columns):
-                ur[j] = scale * (ur[j] - tau * rr[j])
+                ur[j] = <real_t>(scale * (<double>ur[j] - tau * <double>rr[j]))
 
 
 # ----------------------------------------------------------------------------
@@ -348,15 +517,23 @@ def recurrence(double[:, ::1] u, const double[:, ::1] pad, double tau, double sc
 # needs one transform (K g) where the general one takes three, and no set of
 # every point.  These kernels are its three passes over the slab.
 
-def uniform_gap(double[:, ::1] pad, const double[:, ::1] h, double hbar):
+def uniform_gap(pad, h, double hbar):
     """``pad = hbar - h`` (0 in the padding); returns ``(max |pad|, sum pad^2)``."""
+    if _single("uniform_gap", "pad h", (pad, h)):
+        return _uniform_gap[float](0, pad, h, hbar)
+    return _uniform_gap[double](0, pad, h, hbar)
+
+
+cdef object _uniform_gap(real_t kind, object pad_, object h_, double hbar):
+    cdef real_t[:, ::1] pad = pad_
+    cdef const real_t[:, ::1] h = h_
     cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1], w = pad.shape[1]
     cdef double v, a, gmax = 0.0, norm = 0.0
     with nogil:
         for i in range(m):
             for j in range(n):
-                v = hbar - h[i, j]
-                pad[i, j] = v
+                v = <real_t>(hbar - <double>h[i, j])
+                pad[i, j] = <real_t>v
                 norm += v * v
                 a = v if v >= 0.0 else -v
                 if a > gmax:
@@ -368,8 +545,16 @@ def uniform_gap(double[:, ::1] pad, const double[:, ::1] h, double hbar):
     return gmax, norm
 
 
-def uniform_sums(const double[:, ::1] pad, const double[:, ::1] h, double hbar):
+def uniform_sums(pad, h, double hbar):
     """Returns ``(sum z, sum (hbar - h) z)`` with ``z = pad`` (the preconditioned gap)."""
+    if _single("uniform_sums", "pad h", (pad, h)):
+        return _uniform_sums[float](0, pad, h, hbar)
+    return _uniform_sums[double](0, pad, h, hbar)
+
+
+cdef object _uniform_sums(real_t kind, object pad_, object h_, double hbar):
+    cdef const real_t[:, ::1] pad = pad_
+    cdef const real_t[:, ::1] h = h_
     cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1]
     cdef double z, sz = 0.0, sgz = 0.0
     with nogil:
@@ -377,37 +562,45 @@ def uniform_sums(const double[:, ::1] pad, const double[:, ::1] h, double hbar):
             for j in range(n):
                 z = pad[i, j]
                 sz += z
-                sgz += (hbar - h[i, j]) * z
+                sgz += (hbar - <double>h[i, j]) * z
     return sz, sgz
 
 
-def uniform_step(const double[:, ::1] pad, const double[:, ::1] h, double hbar, double zshift,
-                 double pressure, double entry, double[:, ::1] p):
+def uniform_step(pad, h, double hbar, double zshift, double pressure, double entry, p):
     """``p = max(pressure - (z - zshift), 0)``, or ``entry (h - hbar)`` where that is
     <= 0 and the point penetrates (``h > hbar``): :func:`update` with ``tau = 1``.
 
     Returns ``(points re-entering by overlap, points clipped, sum p)``.
     """
+    if _single("uniform_step", "pad h p", (pad, h, p)):
+        return _uniform_step[float](0, pad, h, hbar, zshift, pressure, entry, p)
+    return _uniform_step[double](0, pad, h, hbar, zshift, pressure, entry, p)
+
+
+cdef object _uniform_step(real_t kind, object pad_, object h_, double hbar, double zshift,
+                          double pressure, double entry, object p_):
+    cdef const real_t[:, ::1] pad = pad_
+    cdef const real_t[:, ::1] h = h_
+    cdef real_t[:, ::1] p = p_
     cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1]
     cdef double v, total = 0.0
     cdef long clipped = 0, overlap = 0
     with nogil:
         for i in range(m):
             for j in range(n):
-                v = pressure - (pad[i, j] - zshift)
+                v = <real_t>(pressure - (<double>pad[i, j] - zshift))
                 if v <= 0.0:
                     clipped += 1
                     v = 0.0
                     if h[i, j] > hbar:
-                        v = entry * (h[i, j] - hbar)
+                        v = <real_t>(entry * (<double>h[i, j] - hbar))
                         overlap += 1
-                p[i, j] = v
+                p[i, j] = <real_t>v
                 total += v
     return overlap, clipped, total
 
 
-def final_gap(const double[:, ::1] src, const double[:, ::1] h, const unsigned char[:, ::1] mask,
-              double offset, double[:, ::1] out):
+def final_gap(src, h, const unsigned char[:, ::1] mask, double offset, out):
     """``out <- g = src - h + offset`` projected onto the contact state found.
 
     ``src`` may be padded (the displacement where the solver keeps it), and
@@ -415,9 +608,20 @@ def final_gap(const double[:, ::1] src, const double[:, ::1] h, const unsigned c
     value is read before the value written over it (rows are processed in
     order, and row ``i`` moves to an offset ``i n <= i w``).
     Returns the gap KKT residuals taken before the projection, ``(max |g| on
-    S, max(-g) off S)``; then ``g = 0`` on S and ``g = max(g, 0)`` elsewhere.
-    One pass where NumPy took five.  A NaN makes the residual NaN.
+    S, max(-g) off S)``, of ``g`` as computed in double; then ``g = 0`` on S
+    and ``g = max(g, 0)`` elsewhere.  One pass where NumPy took five.  A NaN
+    makes the residual NaN.
     """
+    if _single("final_gap", "src h out", (src, h, out)):
+        return _final_gap[float](0, src, h, mask, offset, out)
+    return _final_gap[double](0, src, h, mask, offset, out)
+
+
+cdef object _final_gap(real_t kind, object src_, object h_, const unsigned char[:, ::1] mask,
+                       double offset, object out_):
+    cdef const real_t[:, ::1] src = src_
+    cdef const real_t[:, ::1] h = h_
+    cdef real_t[:, ::1] out = out_
     cdef Py_ssize_t i, j, m = h.shape[0], n = h.shape[1]
     cdef double v, a, on = 0.0, off = 0.0
     cdef long nan = 0
@@ -427,7 +631,7 @@ def final_gap(const double[:, ::1] src, const double[:, ::1] h, const unsigned c
     with nogil:
         for i in range(m):
             for j in range(n):
-                v = src[i, j] - h[i, j] + offset
+                v = <double>src[i, j] - <double>h[i, j] + offset
                 nan += v != v
                 if mask[i, j]:
                     a = v if v >= 0.0 else -v
@@ -439,7 +643,7 @@ def final_gap(const double[:, ::1] src, const double[:, ::1] h, const unsigned c
                         off = -v
                     if v < 0.0:
                         v = 0.0
-                out[i, j] = v
+                out[i, j] = <real_t>v
     if nan:
         return float("nan"), float("nan")   # reported, never hidden
     return on, off

@@ -718,7 +718,14 @@ def test_two_ranks_equal_one_with_adhesion(comm, control):
 
     A sticky, non-convex case (process zone 0.6 pixels, 1/kappa_att ~ 8-60): the
     negative-curvature steps and the secant of load control must take the same
-    decisions on any decomposition, which only reorders sums.
+    decisions on any decomposition, which only reorders sums.  The number of
+    inner iterations is exact under mean-gap control; under load control the
+    first inner solve (225 iterations, 77 of them on negative curvature) carries
+    the last-bit difference of the reordered sums through an ill-conditioned
+    stretch, where it grows to 1e-6 of the residual by iteration 140, so the
+    iteration that crosses the 1e-10 tolerance may move by a few: the count is
+    asserted to 2 %, its decisions (negative-curvature steps, outer steps) and
+    its answer exactly or to round-off.
     """
     shape, size = (75, 50), (1.5, 1.0)  # odd, non-square
     serial = make_grid(shape, MPI.COMM_SELF, size=size)
@@ -741,5 +748,10 @@ def test_two_ranks_equal_one_with_adhesion(comm, control):
     for key in ("mean_gap", "mean_pressure", "elastic_energy", "interaction_energy",
                 "repulsive_force", "attractive_force", "inv_kappa_att"):
         assert getattr(many, key) == pytest.approx(getattr(one, key), rel=1e-11), key
-    for key in ("contact_fraction", "iterations", "negative_curvature_steps"):
+    for key in ("contact_fraction", "negative_curvature_steps"):
         assert getattr(many, key) == getattr(one, key), key
+    assert len(many.history) == len(one.history)   # outer steps of load control
+    if control == "mean-gap":
+        assert many.iterations == one.iterations
+    else:
+        assert abs(many.iterations - one.iterations) <= 0.02 * one.iterations
