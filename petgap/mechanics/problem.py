@@ -107,7 +107,9 @@ class ContactSolution:
     (h0' E* A_rep)``, positive for attraction as in the paper's Fig. 3 (the
     paper's Eq. 16 text writes the ratio without the minus sign).  ``converged`` is False
     whenever the tolerance was not met (for instance at the iteration limit);
-    ``reason`` then says why the solver stopped.
+    ``reason`` then says why the solver stopped.  ``precision`` is the floating
+    point the solve ran in: ``"double"``, ``"single"`` (the grid's; the fields are
+    then 32-bit) or ``"mixed"`` (single, refined in double).
     """
 
     gap: np.ndarray
@@ -138,6 +140,7 @@ class ContactSolution:
     negative_curvature_steps: int = 0
     start: str = ""
     start_time: float = 0.0
+    precision: str = "double"
 
     def scalars(self):
         """The scalar results as a flat dict (for HDF5 attributes and tables)."""
@@ -147,7 +150,7 @@ class ContactSolution:
             "attractive_force", "attractive_fraction", "inv_kappa_att", "kkt_pressure",
             "kkt_gap", "converged", "reason", "solver", "iterations", "operator_applications",
             "wall_time", "direction", "jump", "negative_curvature_steps", "start",
-            "start_time")}
+            "start_time", "precision")}
         out["control"] = self.control.kind
         out["control_value"] = self.control.value
         return out
@@ -183,7 +186,8 @@ class ContactProblem:
         self.grid = grid
         self.half_space = half_space
         self.interaction = interaction or HardWall()
-        self.topography = np.ascontiguousarray(topography, dtype=float)
+        # in the grid's precision (single-precision grids: 32-bit fields, double sums)
+        self.topography = np.ascontiguousarray(topography, dtype=getattr(grid, "dtype", float))
         # The spectral statistics (the surface's own, as reported for it) set the
         # unit-free residual scales.
         stats = statistics(grid, self.topography)
@@ -320,7 +324,9 @@ class ContactProblem:
         for rows in _blocks(gap.shape[0]):
             g, p, c = gap[rows], pressure[rows], contact[rows]
             repulsive = c & (p > 0)
-            local[:3] += (g.sum(), p.sum(), np.count_nonzero(repulsive))
+            # sums in double whatever the fields' precision
+            local[:3] += (g.sum(dtype=np.float64), p.sum(dtype=np.float64),
+                          np.count_nonzero(repulsive))
             local[7] += np.count_nonzero(g <= 0)
             if interaction.adhesive:
                 stress = interaction.derivative(g)          # v'(g) >= 0, tensile
@@ -329,7 +335,7 @@ class ContactProblem:
                 local[5] += stress.sum()
                 local[6] += np.count_nonzero(~repulsive & (g <= interaction.range))
             else:
-                local[4] += p[c].sum()
+                local[4] += p[c].sum(dtype=np.float64)
         total = np.empty_like(local)
         grid.comm.Allreduce(local, total)
         n = grid.npoints
@@ -360,7 +366,8 @@ class ContactProblem:
             kkt_pressure=kkt_p, kkt_gap=kkt_g, converged=bool(converged), reason=str(reason),
             solver=solver, iterations=int(iterations),
             operator_applications=int(operator_applications), wall_time=float(wall_time),
-            history=list(history), start=str(start), start_time=float(start_time))
+            history=list(history), start=str(start), start_time=float(start_time),
+            precision=getattr(grid, "precision", "double"))
 
 
 def _blocks(nrows, points=1 << 16, ncols=None):

@@ -105,11 +105,18 @@ def restrict(grid, coarse, field, f):
 
 
 def prolong(coarse, grid, field, f):
-    """``field`` (this rank's coarse slab) repeated over each block, on this rank's fine slab."""
+    """``field`` (this rank's coarse slab) repeated over each block, on this rank's fine slab.
+
+    Only ``coarse.x_slice`` is read of the coarse grid.  Written row by row into
+    the result: no fine-slab temporaries besides it.
+    """
     m = grid.local_shape[0]
     x0 = grid.x_slice.start
     lo, hi = x0 // f, (x0 + m - 1) // f + 1
-    rows = np.empty((hi - lo, field.shape[1]))
+    rows = np.empty((hi - lo, field.shape[1]), dtype=field.dtype)
     for row, piece in move_rows(grid.comm, field, coarse.x_slice.start, lo, hi):
         rows[row - lo:row - lo + len(piece)] = piece
-    return np.repeat(rows[np.arange(x0, x0 + m) // f - lo], f, axis=1)
+    out = np.empty(grid.local_shape, dtype=field.dtype)
+    for i in range(m):
+        out[i].reshape(-1, f)[...] = rows[(x0 + i) // f - lo][:, None]
+    return out

@@ -62,7 +62,7 @@ a dozen times.  The displacement ``u = K^{-1} p`` is the one full field kept
 between iterations, in the padded layout the transform writes it in; the gap
 ``g = u - h + d`` is recomputed where it is needed.
 
-Cold start: from the solution on a grid 2 or 4 times coarser where the
+Cold start: from the solution on a grid twice as coarse where the
 grid's shape allows (:mod:`petgap.solvers.coarse`, driven by
 :func:`coarse_start_pressure`), otherwise, under load control, from a uniform pressure.  The
 uniform start's first iteration has a closed form
@@ -73,6 +73,15 @@ place, so its peak is one copy of that first set (32 bytes per point of it).
 A start nearer the answer built from the geometry alone (the rigid approach
 carrying the load) saves a few iterations where it works but does not
 converge on some surfaces (see the comment in :func:`polonsky_keer`).
+
+Precision: the solver works in the precision of the problem's grid
+(:class:`petgap.parallel.grid.Grid` ``precision``): on a single-precision grid
+the topography, the displacement, the FFT buffers and the vectors on ``S`` are
+32-bit and every sum, norm and step length is accumulated in double (the
+kernels' accumulators), so that what single precision costs is the rounding of
+the fields, not of the reductions.  The gap ``u - h + d`` is then a difference
+of 7-digit numbers: the KKT residual cannot fall much below ``1e-7 max|h| /
+h0``, and :mod:`petgap.solvers.mixed_precision` refines such a solve in double.
 
 Convergence is judged at the start of an iteration, on the pair ``(p, g)`` the
 iteration starts from, by the gap residual of
@@ -129,6 +138,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                          "use a gap-based solver for adhesion")
     grid, comm = problem.grid, problem.grid.comm
     h = problem.topography
+    dtype = h.dtype   # the grid's precision: every field and set vector in it, sums in double
     timer = Timer()
     refresh_interval = 50  # bound the round-off drift of the u recurrence
     n = grid.npoints
@@ -180,21 +190,24 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
               else problem.top_height - target)
     if initial_pressure is not None or not load:
         if initial_pressure is not None:
-            p = np.asarray(initial_pressure, dtype=float)
+            p = np.asarray(initial_pressure, dtype=dtype)
         else:
             # Mean-gap or indentation control: pressure where the undeformed
             # surfaces overlap.
             p = (h - offset) * (problem.pressure_scale / problem.gap_scale)
         # S = {p > 0}, with p there: the negative part is dropped on the way in
         # (no pass of its own), and p is rescaled to the load on S alone.
-        contact = ContactSet.from_pressure(mask, padded_width, p)
+        contact = ContactSet.from_pressure(mask, padded_width, p, dtype=dtype)
+        # a coarse start's prolonged field is referenced here only: free its slab
+        # before the iterations allocate theirs
         del p
+        initial_pressure = None
         if load:
-            total = global_sums(comm, contact.p.sum())[0]
+            total = global_sums(comm, contact.p.sum(dtype=np.float64))[0]
             if total > 0:
                 contact.p[...] *= target * n / total
             else:
-                contact = ContactSet.everywhere(mask, padded_width, target)
+                contact = ContactSet.everywhere(mask, padded_width, target, dtype=dtype)
     else:
         # Load control from a uniform pressure: every point starts in S, which
         # then shrinks to the points that carry the load.  Robust where starts
@@ -218,7 +231,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     converged, reason, it = False, "max_iterations", 0
     first = 0
     if contact is None and not periodic:
-        contact = ContactSet.everywhere(mask, padded_width, target)  # C P0 is not zero
+        contact = ContactSet.everywhere(mask, padded_width, target, dtype=dtype)  # C P0 is not zero
     if contact is None:
         # Its first iteration in closed form (one transform instead of three,
         # and no set of every point); the uniform set itself only where that
@@ -227,7 +240,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         first_step = _uniform_first_iteration(problem, mask, padded_width, target, scratch,
                                               tolerance, max_iterations, monitor)
         if first_step is None:
-            contact = ContactSet.everywhere(mask, padded_width, target)
+            contact = ContactSet.everywhere(mask, padded_width, target, dtype=dtype)
         else:
             contact, scale, delta, g_old, residual = first_step
             history.append(residual)
@@ -282,7 +295,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             extra = -g.ravel()[points] * (problem.pressure_scale / problem.gap_scale)
             del g, idx, pidx, pS, tS, gS
             contact.merge(points, extra)
-            scale = target * n / global_sums(comm, contact.p.sum())[0] if load else 1.0
+            total = global_sums(comm, contact.p.sum(dtype=np.float64))[0]
+            scale = target * n / total if load else 1.0
             delta, fresh = 0.0, True
             continue
         if preconditioned:
@@ -327,7 +341,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         with event(SET_UPDATE_EVENT):
             entering, clipped, sum_p = _cs.update(pS, tS, gS, tau, tau * stiffness)
             added = overlap[:min(n_over, len(overlap))]
-            added_p = np.empty(len(added))
+            added_p = np.empty(len(added), dtype=dtype)
             sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau * stiffness, added_p)
         n_overlap, n_clipped, sum_p = global_sums(comm, entering + len(added), clipped, sum_p)
         delta = 0.0 if n_overlap > RESTART_FRACTION * n_contact else 1.0
@@ -354,7 +368,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     on, off = _cs.final_gap(u, h, mask, offset - shift, g)
     del u
     residuals = (0.0, comm.allreduce(float(np.max([on, off])), op=MPI.MAX) / problem.gap_scale)
-    p = np.zeros(grid.local_shape)
+    p = np.zeros(grid.local_shape, dtype=dtype)
     p.ravel()[contact.idx] = contact.p
     contact = mask.view(bool)  # 0 or 1: a valid boolean array, no copy
     return problem.make_solution(
@@ -407,7 +421,7 @@ def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, 
     n_overlap, _, sum_p = global_sums(comm, *_cs.uniform_step(padded, h, hbar, zshift, target,
                                                         entry, p))
     # Only shrinking is expected from here: no spare capacity.
-    contact = ContactSet.from_pressure(mask, padded_width, p, spare=1.0)
+    contact = ContactSet.from_pressure(mask, padded_width, p, spare=1.0, dtype=p.dtype)
     _cs.direction_from_buffer(padded, contact.pidx, zshift, 0.0, contact.t)
     delta = 0.0 if n_overlap > 0 else 1.0
     return contact, target * grid.npoints / sum_p, delta, gz, residual
@@ -436,7 +450,17 @@ def coarse_start_pressure(problem, control, tolerance, max_iterations):
     if not finite:
         return None, description + " (NaN: not used)"
     factor = problem.grid.nx // cgrid.nx
-    return coarse.prolong(cgrid, problem.grid, pressure, factor), description
+    rows = cgrid.x_slice
+    # the coarse problem, grid and solution go before the fine field is made
+    del solution, coarse_problem, cgrid
+    return coarse.prolong(_Rows(rows), problem.grid, pressure, factor), description
+
+
+class _Rows:
+    """The coarse grid's rows, all :func:`petgap.solvers.coarse.prolong` reads of it."""
+
+    def __init__(self, x_slice):
+        self.x_slice = x_slice
 
 
 def full_contact_load(problem):
@@ -450,8 +474,9 @@ def full_contact_load(problem):
     """
     def make():
         grid = problem.grid
-        kh = problem.elastic_pressure(np.zeros(grid.local_shape))
-        return -grid.comm.allreduce(float(np.min(kh, initial=np.inf)), op=MPI.MIN)
+        np.copyto(grid.real, problem.topography)     # K h in the FFT buffer: no slab copies
+        problem.half_space.apply_in_buffer()
+        return -grid.comm.allreduce(float(np.min(grid.real, initial=np.inf)), op=MPI.MIN)
     return problem.derived("full_contact_load", make)
 
 

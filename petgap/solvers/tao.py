@@ -73,8 +73,6 @@ class _PetgapTao:
             self.solution = gap_cg(
                 self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
                 initial_gap=None if self.initial is None else self.initial.gap, monitor=report)
-        x = tao.getSolution()
-        x.getArray()[:] = self.solution.gap.ravel()
         tao.setIterationNumber(self.solution.iterations)
         tao.setConvergedReason(PETSc.TAO.Reason.CONVERGED_USER if self.solution.converged
                                else PETSc.TAO.Reason.DIVERGED_MAXITS)
@@ -88,7 +86,11 @@ def tao_solve(problem, control, tao_type, tolerance, max_iterations, initial, op
     comm = grid.comm
     timer = Timer()
     nloc = grid.local_shape[0] * grid.local_shape[1]
-    x = PETSc.Vec().createMPI((nloc, grid.npoints), comm=comm)
+    # petgap's own types keep their fields themselves and return them in the
+    # solution: TAO gets an empty solution Vec, not a slab-sized copy of the gap
+    # (8 bytes per point at the solve's peak)
+    own = tao_type in PETGAP_TYPES
+    x = PETSc.Vec().createMPI((0 if own else nloc, 0 if own else grid.npoints), comm=comm)
     tao = PETSc.TAO().create(comm=comm)
     try:
         tao.setSolution(x)

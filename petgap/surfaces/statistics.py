@@ -182,15 +182,18 @@ def finite_difference_slopes(grid, h_local):
             comm.Sendrecv(np.ascontiguousarray(h_local[0]), dest=prev, recvbuf=below, source=nxt)
     sums = np.zeros(4)   # x: inner, seam; y: inner, seam
     if rows:
-        dx = np.diff(h_local, axis=0)
-        sums[0] += np.sum(dx ** 2)
+        # in blocks of rows: no slab-sized temporaries (a run's peak memory is set
+        # here otherwise, before the solve)
+        for i0, i1 in _row_blocks(rows, ny):
+            block = h_local[i0:min(i1 + 1, rows)]      # with the next row, if this rank has it
+            sums[0] += np.sum(np.diff(block, axis=0) ** 2)
+            sums[2] += np.sum(np.diff(block[:i1 - i0], axis=1) ** 2)
+            sums[3] += np.sum((block[:i1 - i0, 0] - block[:i1 - i0, -1]) ** 2)
         last = (below - h_local[-1]) ** 2
         if grid.x_slice.stop == nx:
             sums[1] += np.sum(last)          # the wrap-around pairs of x
         else:
             sums[0] += np.sum(last)
-        sums[2] += np.sum(np.diff(h_local, axis=1) ** 2)
-        sums[3] += np.sum((h_local[:, 0] - h_local[:, -1]) ** 2)
     comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
     ax, ay = grid.dx ** -2, grid.dy ** -2
     periodic = np.sqrt(ax * (sums[0] + sums[1]) / (nx * ny) + ay * (sums[2] + sums[3]) / (nx * ny))
@@ -209,6 +212,12 @@ def low_pass(grid, h_local, q_cutoff):
     c = grid.forward(h_local)
     c[grid.q_magnitude() > q_cutoff] = 0.0
     return grid.backward() / grid.npoints
+
+
+def _row_blocks(rows, ny, points=1 << 16):
+    """``(start, stop)`` of consecutive blocks of about ``points`` values of a slab."""
+    step = max(1, points // max(ny, 1))
+    return [(i, min(i + step, rows)) for i in range(0, rows, step)]
 
 
 def finite_difference_curvature(grid, h_local):
@@ -237,13 +246,19 @@ def finite_difference_curvature(grid, h_local):
         comm.Sendrecv(np.ascontiguousarray(h_local[-1]), dest=nxt, recvbuf=above, source=prev)
         comm.Sendrecv(np.ascontiguousarray(h_local[0]), dest=prev, recvbuf=below, source=nxt)
     total = 0.0
-    if rows:
-        ext = np.vstack([above[None, :], h_local, below[None, :]])
+    first = 1 if start == 0 else 0                    # global rows 1 .. nx - 2 only
+    last = rows - 1 if start + rows == nx else rows
+    # in blocks of rows, each with its neighbours: no slab-sized temporaries
+    for i0, i1 in _row_blocks(rows, ny):
+        i0, i1 = max(i0, first), min(i1, last)
+        if i0 >= i1:
+            continue
+        top = h_local[i0 - 1:i0] if i0 > 0 else above[None, :]
+        bottom = h_local[i1:i1 + 1] if i1 < rows else below[None, :]
+        ext = np.vstack([top, h_local[i0:i1], bottom])
         centre = ext[1:-1, 1:-1]
         lap = ((ext[2:, 1:-1] + ext[:-2, 1:-1] - 2 * centre) / grid.dx ** 2
                + (ext[1:-1, 2:] + ext[1:-1, :-2] - 2 * centre) / grid.dy ** 2)
-        first = 1 if start == 0 else 0                    # global rows 1 .. nx - 2 only
-        last = rows - 1 if start + rows == nx else rows
-        total = float(np.sum(lap[first:last] ** 2))
+        total += float(np.sum(lap ** 2))
     total = comm.allreduce(total, op=MPI.SUM)
     return float(np.sqrt(total / ((nx - 2) * (ny - 2))) / 2)
