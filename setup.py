@@ -49,6 +49,18 @@ extension = Extension(
     define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
 )
 
+# The same binding on FFTW's single-precision library (petgap/parallel/_fftw_body.pxi
+# is the source of both).
+extension_single = Extension(
+    "petgap.parallel._fftw_mpi_single",
+    sources=["petgap/parallel/_fftw_mpi_single.pyx"],
+    include_dirs=extension.include_dirs,
+    library_dirs=extension.library_dirs,
+    libraries=["fftw3f_mpi", "fftw3f", "m"] + [f[2:] for f in link_flags if f.startswith("-l")],
+    extra_compile_args=optimise,
+    define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
+)
+
 kernels = Extension(
     "petgap.solvers._kernels",
     sources=["petgap/solvers/_kernels.pyx"],
@@ -66,7 +78,8 @@ contact_set = Extension(
 
 setup(
     packages=find_packages(include=["petgap", "petgap.*"]),
-    ext_modules=cythonize([extension, kernels, contact_set], language_level=3,
+    ext_modules=cythonize([extension, extension_single, kernels, contact_set],
+                          language_level=3,
                           compiler_directives={"boundscheck": False, "wraparound": False,
                                                "cdivision": True, "initializedcheck": False}),
 )

@@ -35,9 +35,11 @@ to .npy, and solved
 
 Usage::
 
-    python benchmarks/contact.py --sizes 512 1024 2048 --ranks 1 2 [--rounds 5] [--tamaas] [--no-coarse] [--protocol --work W]
+    python benchmarks/contact.py --sizes 512 1024 2048 --ranks 1 2 [--rounds 5] [--tamaas] [--no-coarse]
+        [--protocol --work W] [--precision double single mixed]
 """
 import argparse
+import itertools
 import json
 import os
 import re
@@ -63,7 +65,7 @@ def worker(args):
     from petsc4py import PETSc
 
     from petgap.app.build import build
-    from petgap.io.scene import Scene
+    from petgap.io.scene import SINGLE_TOLERANCE_FLOOR, Scene
     from petgap.parallel.log import OPERATOR_EVENT, event
     from petgap.surfaces.topography import save_topography_npy
 
@@ -75,7 +77,10 @@ def worker(args):
                else {"kind": "load", "values": [args.load]})
     interaction = ({"kind": "exponential", "work_of_adhesion": args.work, "range": args.range,
                     "resolution_check": "off"} if args.work > 0 else {"kind": "hard-wall"})
-    solver = {"tao_type": args.solver, "tolerance": args.tolerance,
+    precision = args.precision[0]
+    solver = {"tao_type": args.solver, "precision": precision,
+              "tolerance": (max(args.tolerance, SINGLE_TOLERANCE_FLOOR)
+                            if precision == "single" else args.tolerance),
               "max_iterations": args.max_iterations, "planner": "measure"}
     if args.no_coarse:
         solver["petsc_options"] = {"petgap_coarse_start": 0}
@@ -196,6 +201,10 @@ def main():
     parser.add_argument("--sizes", type=int, nargs="+", default=[512, 1024, 2048])
     parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--solver", default="pcg")
+    parser.add_argument("--precision", nargs="+", default=["double"],
+                        choices=["double", "single", "mixed"],
+                        help="solver.precision of the petgap solves, one row each (single "
+                             "at its tolerance floor if --tolerance is below it)")
     parser.add_argument("--tolerance", type=float, default=1e-8)
     parser.add_argument("--max-iterations", type=int, default=20000)
     parser.add_argument("--load", type=float, default=0.002)
@@ -224,10 +233,11 @@ def main():
         for n in args.sizes:
             surface = Path(tmp) / f"h{n}.npy"
             tam = None
-            for ranks in args.ranks:
+            for ranks, precision in itertools.product(args.ranks, args.precision):
                 def arguments(work, mean_gap):
                     out = ["--no-coarse"] if args.no_coarse else []
-                    out += ["--solver", args.solver, "--tolerance", str(args.tolerance),
+                    out += ["--solver", args.solver, "--precision", precision,
+                            "--tolerance", str(args.tolerance),
                            "--max-iterations", str(args.max_iterations), "--load", str(args.load),
                            "--work", str(work), "--range", str(args.range)]
                     if mean_gap is not None:
@@ -286,7 +296,8 @@ def main():
                 if tam is not None and ranks == 1:
                     t_cols = [str(tam["iterations"]), f"{tam['time']:.2f}", f"{tam['kkt_gap']:.1e}",
                               f"{res['wall_time'] / tam['time']:.3f}"]
-                print(f"| {n}^2 | {ranks} | {res['solver']} | {res['iterations']} | {pairs:.2f} | "
+                print(f"| {n}^2 | {ranks} | {res['solver']} ({precision}) | {res['iterations']} "
+                      f"| {pairs:.2f} | "
                       f"{per_it:.4f} | {floor:.4f} | {ratio:.2f} | "
                       + (f"{operator_ratio:.2f} | {100 * rest:.0f} % | " if operator_ratio > 0
                          else "- | - | ")  # solvers that do not use these operators

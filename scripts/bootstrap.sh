@@ -57,8 +57,8 @@ fi
 
 # (Re)build petgap when a source of the compiled part is newer than the build.
 stamp="$PETGAP_VENV/.petgap-build-stamp"
-if [ ! -f "$stamp" ] || [ -n "$(find "$PETGAP_ROOT/setup.py" "$PETGAP_ROOT/petgap" -name '*.pyx' -newer "$stamp" -o -name setup.py -newer "$stamp" | head -n 1)" ] \
-   || ! "$PETGAP_VENV/bin/python" -c 'import petgap.parallel._fftw_mpi' 2>/dev/null; then
+if [ ! -f "$stamp" ] || [ -n "$(find "$PETGAP_ROOT/setup.py" "$PETGAP_ROOT/petgap" \( -name '*.pyx' -o -name '*.pxi' -o -name setup.py \) -newer "$stamp" | head -n 1)" ] \
+   || ! "$PETGAP_VENV/bin/python" -c 'import petgap.parallel._fftw_mpi, petgap.parallel._fftw_mpi_single' 2>/dev/null; then
   echo "petgap setup: building petgap" >&2
   (cd "$PETGAP_ROOT" && "$PETGAP_VENV/bin/python" -m pip install --no-build-isolation --no-deps -q -e . >&2)
   touch "$stamp"

@@ -22,6 +22,7 @@ import math
 import resource
 from dataclasses import dataclass, field
 
+import numpy as np
 from mpi4py import MPI
 
 from petgap.app import protocol
@@ -79,10 +80,16 @@ def load_scene(path, comm=None):
     return Scene.from_file(path, comm, read_header=map_header)
 
 
-def make_grid(scene, comm):
-    """The :class:`~petgap.parallel.grid.Grid` of a scene on ``comm``."""
+def make_grid(scene, comm, precision="double", planner=None):
+    """The :class:`~petgap.parallel.grid.Grid` of a scene on ``comm``.
+
+    ``precision`` of its fields (see :func:`build` for when a scene's grid is
+    single); ``planner`` overrides the scene's FFTW planner effort.
+    """
     g = scene.grid
-    return Grid((g.nx, g.ny), size=g.size, comm=comm, planner=scene.solver.planner)
+    return Grid((g.nx, g.ny), size=g.size, comm=comm,
+                planner=scene.solver.planner if planner is None else planner,
+                precision=precision)
 
 
 def make_surface(scene, grid):
@@ -317,7 +324,7 @@ class Model:
         """Keyword arguments of :func:`petgap.solvers.dispatch.solve` from the scene's solver section."""
         s = self.scene.solver
         return dict(solver=s.tao_type, tolerance=s.tolerance, max_iterations=s.max_iterations,
-                    options=self.options)
+                    options=self.options, precision=s.precision)
 
     def problem_of(self, step):
         """The problem a planned step solves."""
@@ -374,10 +381,21 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
     check_options(scene, petsc_args, strict=strict, log=log)
     steps = protocol.plan(scene)
     check_size(scene, comm, solve=bool(steps))
-    with _timed(log, f"planning FFTs ({scene.solver.planner})"):
-        grid = make_grid(scene, comm)
-    with _timed(log, "making the surface"):
-        topography = surface(grid) if surface is not None else make_surface(scene, grid)
+    if steps and scene.solver.precision == "single":
+        # The surface is made in double and rounded: the same surface as a double
+        # run's (its random numbers are drawn in double), so that the two compare.
+        with _timed(log, "making the surface (in double, then rounded to single)"):
+            scratch = make_grid(scene, comm, planner="estimate")
+            topography = (surface(scratch) if surface is not None
+                          else make_surface(scene, scratch)).astype(np.float32)
+            del scratch
+        with _timed(log, f"planning FFTs ({scene.solver.planner}, single precision)"):
+            grid = make_grid(scene, comm, precision="single")
+    else:
+        with _timed(log, f"planning FFTs ({scene.solver.planner})"):
+            grid = make_grid(scene, comm)
+        with _timed(log, "making the surface"):
+            topography = surface(grid) if surface is not None else make_surface(scene, grid)
     args = list(scene.solver.petsc_args()) + list(petsc_args)
     model = Model(scene=scene, grid=grid, topography=topography, steps=steps,
                   petsc_args=args, options=petsc_options_dict(args))

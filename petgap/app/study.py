@@ -2,9 +2,9 @@
 
 ``mpirun -n P petgap study SCENE.toml [--output-dir DIR] [--tolerances T ...]
 [--resolutions R ...] [--quick] [--max-points N] [--fit-range LO HI]
-[--ladders tolerance resolution] [--overwrite] [--quiet]``
+[--ladders tolerance resolution precision] [--overwrite] [--quiet]``
 
-Solves the scene's first control value on two ladders and measures, against the
+Solves the scene's first control value on three ladders and measures, against the
 most accurate rung of each, what every rung costs and how wrong it is:
 
 *tolerance ladder*
@@ -16,6 +16,12 @@ most accurate rung of each, what every rung costs and how wrong it is:
     ``a0`` and ``nx``, ``ny`` together; at the scene's tolerance.  Rungs whose grid
     would exceed ``--max-points`` (default ``4096^2``) are skipped, and the table
     says so.
+*precision ladder*
+    The scene at its own grid and tolerance in ``solver.precision`` = single
+    (at its tolerance floor, :data:`petgap.io.scene.SINGLE_TOLERANCE_FLOOR`, if
+    the scene's is tighter), mixed and double (the reference).  Single and mixed
+    solve non-adhesive contact on a periodic cell with the pressure solver; for
+    other scenes their rungs are skipped, saying why.
 
 Cost: solver wall time, iterations, FFT pairs (elastic operator applications),
 and the peak memory of the rung (grid, surface, problem and solve; not the
@@ -30,7 +36,7 @@ geometry (``c``, ``d_rep``, mean gap, ``p(g)``) comes from the non-adhesive step
 ``F_att`` from the adhesive step at its mean gap; costs are summed.
 
 Rank 0 prints a table and writes ``study.csv``, ``study.json`` and ``study.png``
-(relative error against wall time, one panel per quantity, both ladders) into
+(relative error against wall time, one panel per quantity, every ladder) into
 the output directory, never over existing files unless ``--overwrite``.
 
 One physical surface on every grid
@@ -59,6 +65,7 @@ from petgap import analysis
 from petgap.app.argtypes import number_in, positive_float
 from petgap.app.build import build, load_scene, make_grid, make_surface
 from petgap.app.study_report import StudyError, check_outputs, format_table, write_outputs
+from petgap.io.scene import SINGLE_TOLERANCE_FLOOR
 from petgap.parallel.collective import root_decides
 from petgap.parallel.grid import DecompositionError
 from petgap.parallel.log import get_logger
@@ -78,7 +85,9 @@ DEFAULT_MAX_POINTS = 4096 ** 2
 DEFAULT_FIT_RANGE = (1e-3, 0.1)
 #: Logarithmic bins per decade of the common ``x`` bins.
 BINS_PER_DECADE = 10
-LADDERS = ("tolerance", "resolution")
+LADDERS = ("tolerance", "resolution", "precision")
+#: Rungs of the precision ladder, least accurate first.
+PRECISIONS = ("single", "mixed", "double")
 
 
 # ======================================================= one surface, many grids
@@ -154,6 +163,8 @@ class Rung:
 
     @property
     def label(self):
+        if self.ladder == "precision":
+            return PRECISIONS[int(self.value)]
         if self.ladder == "resolution":
             return f"{self.value:g} a0"
         short = f"{self.value:.0e}"
@@ -171,6 +182,36 @@ def tolerance_ladder(scene, tolerances):
     for t in sorted(set(float(t) for t in tolerances), reverse=True):
         variant = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, tolerance=t))
         rungs.append(Rung("tolerance", t, variant, g.nx, g.ny, g.a0))
+    return rungs
+
+
+def precision_ladder(scene):
+    """Rungs at the scene's grid in single, mixed and double precision (the last is the reference).
+
+    ``value`` is the index into :data:`PRECISIONS`.  Single runs at
+    ``max(tolerance, SINGLE_TOLERANCE_FLOOR)``; single and mixed are skipped,
+    with the reason, for scenes they do not solve (adhesion, a free boundary,
+    solvers other than the pressure solver).
+    """
+    g, solver = scene.grid, scene.solver
+    why = None
+    if scene.interaction.kind != "hard-wall" or scene.control.reference == "non-adhesive":
+        why = "single and mixed precision are for non-adhesive contact"
+    elif not scene.surface.periodic:
+        why = "single and mixed precision are for a periodic cell (surface.periodic = true)"
+    elif solver.tao_type not in ("pcg", "pcg-pressure"):
+        why = (f"single and mixed precision run the pressure solver, and tao_type = "
+               f"{json.dumps(solver.tao_type)}")
+    rungs = []
+    for i, precision in enumerate(PRECISIONS):
+        tolerance = solver.tolerance
+        if precision == "single":
+            tolerance = max(tolerance, SINGLE_TOLERANCE_FLOOR)
+        variant = dataclasses.replace(scene, solver=dataclasses.replace(
+            solver, precision=precision, tolerance=tolerance))
+        skipped = why if precision != "double" else None
+        rungs.append(Rung("precision", float(i), None if skipped else variant, g.nx, g.ny, g.a0,
+                          skipped=skipped))
     return rungs
 
 
@@ -354,7 +395,8 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
     first = dataclasses.replace(scene, control=dataclasses.replace(
         scene.control, values=tuple(scene.control.values[:1])))
     row = {"ladder": rung.ladder, "rung": rung.label, "value": rung.value, "nx": rung.nx,
-           "ny": rung.ny, "a0": rung.a0, "tolerance": scene.solver.tolerance, "skipped": None,
+           "ny": rung.ny, "a0": rung.a0, "tolerance": scene.solver.tolerance,
+           "precision": scene.solver.precision, "skipped": None,
            "lambda_min_a0": (scene.surface.lambda_min / rung.a0
                              if scene.surface.kind == "self-affine" else None)}
     what = f"{rung.ladder} rung {rung.label}"
@@ -432,7 +474,7 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
 # ====================================================================== a study
 @dataclass
 class StudyResult:
-    """Rows of both ladders (dicts, the same on every rank) and what they were measured against."""
+    """Rows of the ladders (dicts, the same on every rank) and what they were measured against."""
     scene: object
     quantities: list
     rows: dict            # ladder -> list of row dicts, least to most accurate
@@ -470,6 +512,8 @@ def run_study(scene, comm=None, *, tolerances=DEFAULT_TOLERANCES, resolutions=DE
         else:
             rungs = [_fits(r, source.band) for r in rungs]
         plan["resolution"] = rungs
+    if "precision" in ladders:
+        plan["precision"] = precision_ladder(scene)
     rows, done = {}, {}
     for ladder, rungs in plan.items():
         rows[ladder] = []
@@ -478,7 +522,7 @@ def run_study(scene, comm=None, *, tolerances=DEFAULT_TOLERANCES, resolutions=DE
                 log.warning("%s rung %s skipped: %s", ladder, rung.label, rung.skipped)
                 rows[ladder].append(_skipped_row(rung))
                 continue
-            key = (rung.nx, rung.ny, rung.scene.solver.tolerance)
+            key = (rung.nx, rung.ny, rung.scene.solver.tolerance, rung.scene.solver.precision)
             if key in done:  # the same solve on the other ladder: measured once
                 row = dict(done[key][0], ladder=ladder, rung=rung.label, value=rung.value,
                            shared_with=f"{done[key][1]} rung {done[key][0]['rung']}")
@@ -592,7 +636,7 @@ def add_parser(subparsers):
                    help="x = g/g0 range of the common power-law fit (default 0.001 0.1, "
                         "where the paper finds Eq. 13)")
     p.add_argument("--ladders", nargs="+", choices=LADDERS, default=list(LADDERS),
-                   help="which ladders to run (default both)")
+                   help="which ladders to run (default all three)")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     p.add_argument("-q", "--quiet", action="store_true",
                    help="print only the table, warnings and errors")

@@ -38,7 +38,7 @@ class StudyError(ValueError):
 
 
 COLUMNS = ["ladder", "rung", "value", "reference", "skipped", "shared_with", "nx", "ny", "a0",
-           "lambda_min_a0", "tolerance", "converged", "reason", "iterations", "fft_pairs",
+           "lambda_min_a0", "tolerance", "precision", "converged", "reason", "iterations", "fft_pairs",
            "wall_time", "setup_time", "bytes_per_point", "peak_rss_mib", "kkt_pressure",
            "kkt_gap", "rms_height", "rms_slope", "adhesion_resolved", "c", "d_rep", "g0",
            "mean_gap", "mean_pressure", "exponent", "prefactor", "fit_points",
@@ -112,13 +112,13 @@ def write_outputs(study, output_dir, argv=None):
 
 
 def figure(study, path):
-    """Relative error against solver wall time, one panel per quantity, both ladders."""
+    """Relative error against solver wall time, one panel per quantity, every ladder."""
     plt = pyplot()
     quantities = study.quantities
     ncols = 3
     nrows = int(math.ceil(len(quantities) / ncols))
     fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.4 * nrows), squeeze=False)
-    styles = {"tolerance": ("o", "C0"), "resolution": ("s", "C3")}
+    styles = {"tolerance": ("o", "C0"), "resolution": ("s", "C3"), "precision": ("^", "C2")}
     floor = 1e-12
     for ax, q in zip(axes.flat, quantities):
         for ladder, rows in study.rows.items():
@@ -183,6 +183,8 @@ def format_table(study):
         title = (f"{ladder} ladder" + (f" at {scene.nx} x {scene.ny}, a0 = {scene.a0:g}"
                                         if ladder == "tolerance" else
                                         f" at tolerance {study.scene.solver.tolerance:g}"))
+        if ladder == "precision":
+            title += f", {scene.nx} x {scene.ny}"
         if ref is not None:
             r = rows[ref]
             values = ", ".join(f"{q} = {_fmt(r.get(q), '.6g')}" for q in study.quantities)

@@ -718,6 +718,10 @@ class ControlSection:
                              'reference only with interaction.kind = "exponential"'))
 
 
+#: Smallest solver tolerance of ``solver.precision = "single"`` (docs/accuracy.md).
+SINGLE_TOLERANCE_FLOOR = 1e-6
+
+
 @dataclass(frozen=True)
 class SolverSection:
     """The minimiser and its stopping rule.
@@ -740,6 +744,12 @@ class SolverSection:
     petsc_options: tuple = key(OptionTable(), (), "extra PETSc options database entries")
     planner: str = key(Choice("estimate", "measure", "patient"), "measure",
                        "FFTW planner effort (plans are cached as wisdom on disk)")
+    precision: str = key(Choice("double", "single", "mixed"), "double",
+                         "floating point of the solve: double; single (fields and transforms "
+                         "in 32 bits, sums in 64; half the memory, tolerance at least "
+                         "1e-6); mixed (a single solve refined in double to the tolerance). "
+                         "single and mixed: non-adhesive, periodic, the pressure solver; "
+                         "docs/accuracy.md has the trade")
 
     @staticmethod
     def _check(values, ctx, problems):
@@ -748,6 +758,27 @@ class SolverSection:
                 ("pcg", "pcg-pressure"):
             problems.append(("tao_type", values["tao_type"], "does not solve indentation "
                              "control (the pressure solver does)", '"pcg" or "pcg-pressure"'))
+        precision = values["precision"]
+        if precision == "double":
+            return
+        interaction, surface = ctx.get("interaction"), ctx.get("surface")
+        if interaction is not None and interaction.kind != "hard-wall":
+            problems.append(("precision", precision, "is for the non-adhesive pressure solver, "
+                             f"and interaction.kind = {json.dumps(interaction.kind)}",
+                             '"double" with adhesion'))
+        elif values["tao_type"] not in ("pcg", "pcg-pressure"):
+            problems.append(("precision", precision, f"is for the pressure solver, and "
+                             f"tao_type = {json.dumps(values['tao_type'])}",
+                             '"double", or tao_type = "pcg" or "pcg-pressure"'))
+        elif surface is not None and not surface.periodic:
+            problems.append(("precision", precision, "is for a periodic cell, and "
+                             "surface.periodic = false", '"double" on a free boundary'))
+        elif precision == "single" and values["tolerance"] < SINGLE_TOLERANCE_FLOOR:
+            problems.append(("tolerance", values["tolerance"],
+                             "is below what single precision resolves (the gap is a "
+                             "difference of heights with 7 significant digits)",
+                             f'>= {SINGLE_TOLERANCE_FLOOR:g} with precision = "single", or '
+                             f'precision = "mixed" to refine in double'))
 
     def petsc_args(self):
         """The options as a command-line style list ``["-name", "value", ...]``."""

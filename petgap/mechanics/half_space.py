@@ -30,7 +30,7 @@ without keeping it themselves and ``-log_view`` shows the operator's time.
 """
 import numpy as np
 
-from petgap.parallel._fftw_mpi import weighted_power
+from petgap.parallel.grid import weighted_power
 from petgap.parallel.log import OPERATOR_EVENT, event
 
 

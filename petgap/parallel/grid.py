@@ -28,10 +28,23 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from petgap.parallel import _fftw_mpi
+from petgap.parallel import _fftw_mpi, _fftw_mpi_single
 
 #: Where FFTW wisdom is cached between runs (override with PETGAP_WISDOM_DIR).
 WISDOM_DIR_ENV = "PETGAP_WISDOM_DIR"
+#: The binding of each precision (the same source, ``_fftw_body.pxi``, on FFTW's double
+#: and single libraries).
+BINDINGS = {"double": _fftw_mpi, "single": _fftw_mpi_single}
+
+
+def weighted_power(c, qx, qy, wrow, power):
+    """``sum_j wrow[j] sum_i |c[j, i]|^2 |q|^power`` over a Fourier slab of either precision.
+
+    :func:`petgap.parallel._fftw_mpi.weighted_power` (accumulated in double) for a
+    ``complex128`` or ``complex64`` slab.
+    """
+    binding = _fftw_mpi_single if c.dtype == np.complex64 else _fftw_mpi
+    return binding.weighted_power(c, qx, qy, wrow, power)
 
 
 class DecompositionError(ValueError):
@@ -66,6 +79,11 @@ class Grid:
         runs on the same grid and rank count plan instantly.
     wisdom : bool
         Read and write the on-disk wisdom cache.
+    precision : {"double", "single"}
+        Element type of the FFT buffers and of the fields made for this grid
+        (:attr:`dtype`, :attr:`complex_dtype`): 64- or 32-bit.  Wavevectors,
+        multipliers and the reductions of :meth:`sum`, :meth:`mean` and
+        :meth:`fourier_sum` are double in both.
 
     Raises
     ------
@@ -74,7 +92,18 @@ class Grid:
         Fourier row (FFTW-MPI distributes rows in blocks of ``ceil(n / P)``).
     """
 
-    def __init__(self, shape, size=None, comm=None, planner="measure", wisdom=True):
+    def __init__(self, shape, size=None, comm=None, planner="measure", wisdom=True,
+                 precision="double"):
+        if precision not in BINDINGS:
+            raise ValueError(f"precision = {precision!r} is not allowed: need one of "
+                             f"{', '.join(map(repr, BINDINGS))}")
+        #: ``"double"`` or ``"single"``: see the class docstring.
+        self.precision = precision
+        binding = BINDINGS[precision]
+        self._binding = binding
+        #: dtype of real fields on this grid, and of the Fourier buffer.
+        self.dtype = np.dtype(binding.REAL_DTYPE)
+        self.complex_dtype = np.dtype(binding.COMPLEX_DTYPE)
         self.comm = MPI.COMM_WORLD if comm is None else comm
         #: FFTW planner effort and wisdom cache use, for grids derived from this one.
         self.planner, self.wisdom = planner, wisdom
@@ -92,8 +121,8 @@ class Grid:
         self.fourier_local_shape = (ln1, nx)
 
         # FFT buffers: the padded real slab and the transposed Fourier slab.
-        self._real_storage = _aligned_empty(2 * alloc, np.float64)
-        self._fourier_storage = _aligned_empty(alloc, np.complex128)
+        self._real_storage = _aligned_empty(2 * alloc, self.dtype)
+        self._fourier_storage = _aligned_empty(alloc, self.complex_dtype)
         #: The real-space FFT buffer in FFTW's padded r2c layout, ``(nx_local,
         #: 2 (ny // 2 + 1))``: kernels that fill or read the buffer in a pass of
         #: their own, and the flat indices of :meth:`convolve_qpower_sparse`, use it.
@@ -106,11 +135,11 @@ class Grid:
         started = time.perf_counter()
         if wisdom:
             self._load_wisdom()
-        self._plans = _fftw_mpi.SlabPlans(self.comm, nx, ny, self._real_storage,
-                                          self._fourier_storage, planner)
-        self._convolution = _fftw_mpi.ConvolutionPlans(self.comm, nx, ny, ln0, ln1,
-                                                       self._real_storage,
-                                                       self._fourier_storage, planner)
+        self._plans = binding.SlabPlans(self.comm, nx, ny, self._real_storage,
+                                        self._fourier_storage, planner)
+        self._convolution = binding.ConvolutionPlans(self.comm, nx, ny, ln0, ln1,
+                                                     self._real_storage,
+                                                     self._fourier_storage, planner)
         if wisdom and planner != "estimate":
             self._save_wisdom()
         #: Seconds spent planning the transforms (with the wisdom cache read and written):
@@ -207,6 +236,10 @@ class Grid:
         gathered output (see
         :meth:`petgap.parallel._fftw_mpi.ConvolutionPlans.apply_sparse`).
         """
+        for name, a in (("values", values), ("out", out), ("gathered", gathered)):
+            if a is not None and a.dtype != self.dtype:
+                raise TypeError(f"convolve_qpower_sparse: {name} is {a.dtype}, the grid's "
+                                f"fields are {self.dtype} ({self.precision} precision)")
         self._convolution.apply_sparse(pidx, values, self.qx, self.qy, scale, power, out,
                                        gathered)
 
@@ -217,7 +250,7 @@ class Grid:
         write them directly (``out`` of :meth:`convolve_qpower_sparse`).
         """
         padded = self.padded
-        array = _aligned_empty(padded.size, np.float64).reshape(padded.shape)
+        array = _aligned_empty(padded.size, self.dtype).reshape(padded.shape)
         array[...] = 0.0
         return array
 
@@ -232,7 +265,10 @@ class Grid:
     # ------------------------------------------------------------ reductions
     def sum(self, local):
         """Global sum of a local array over all ranks."""
-        return self.comm.allreduce(float(np.sum(local)), op=MPI.SUM)
+        local = np.asarray(local)
+        # single-precision fields are summed in double
+        dtype = np.float64 if local.dtype == np.float32 else None
+        return self.comm.allreduce(float(np.sum(local, dtype=dtype)), op=MPI.SUM)
 
     def mean(self, local):
         """Global mean over the real-space grid of a ``local_shape`` array."""
@@ -240,8 +276,9 @@ class Grid:
 
     def fourier_sum(self, local_terms):
         """Full-plane sum of a half-plane quantity (rows weighted by multiplicity)."""
-        return self.comm.allreduce(float(np.sum(self.hermitian_weight[:, None] * local_terms)),
-                                   op=MPI.SUM)
+        return self.comm.allreduce(
+            float(np.sum(self.hermitian_weight[:, None] * local_terms)),   # float64 weights
+            op=MPI.SUM)
 
     def gather(self, local, root=0):
         """Assemble the global ``(nx, ny)`` array on ``root`` (None elsewhere).
@@ -263,7 +300,8 @@ class Grid:
         """File caching FFTW wisdom for this machine and rank count."""
         root = Path(os.environ.get(WISDOM_DIR_ENV) or Path.home() / ".cache" / "petgap")
         host = hashlib.sha1(os.uname().nodename.encode()).hexdigest()[:8]
-        return root / f"fftw-wisdom-{host}-np{self.comm.size}.txt"
+        single = "-single" if self.precision == "single" else ""   # FFTW keeps them apart
+        return root / f"fftw-wisdom-{host}-np{self.comm.size}{single}.txt"
 
     def _load_wisdom(self):
         text = None
@@ -272,10 +310,10 @@ class Grid:
                 text = self.wisdom_path().read_text()
             except OSError:
                 text = None
-        _fftw_mpi.import_wisdom(self.comm, text)
+        self._binding.import_wisdom(self.comm, text)
 
     def _save_wisdom(self):
-        text = _fftw_mpi.export_wisdom(self.comm)
+        text = self._binding.export_wisdom(self.comm)
         if self.comm.rank == 0 and text:
             path = self.wisdom_path()
             try:

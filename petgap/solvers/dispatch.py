@@ -15,7 +15,7 @@ Solver types
     that each step reports which branch it landed on.
 ``pcg-pressure``, ``pcg-gap``
     Force one formulation.  A cold ``pcg-pressure`` solve starts from the
-    solution on a grid 2 or 4 times coarser where the shape allows
+    solution on a grid twice as coarse where the shape allows
     (:mod:`petgap.solvers.coarse`); ``-petgap_coarse_start 0`` starts it from the
     uniform pressure instead.
 ``bncg``, ``blmvm``, ``bqnls``, ``gpcg`` (TAO built-ins)
@@ -27,6 +27,15 @@ Solver types
     grid.  Mean-gap control wraps them in an exact multiplier update: the mean
     pressure ``P0`` is adjusted by a secant iteration on ``log(P0 / h0' E*)``
     around inexact inner solves until the mean gap matches.
+
+Precision
+---------
+``precision="single"`` is a problem on a single-precision grid (the caller
+makes it; :class:`petgap.parallel.grid.Grid` ``precision``); ``"mixed"`` is a
+double problem solved first on its single twin and refined
+(:mod:`petgap.solvers.mixed_precision`).  Both run ``pcg-pressure`` (``pcg``
+means it here, under load and mean gap), non-adhesive and periodic; other
+solvers, adhesion and the free boundary refuse them, saying so.
 
 On a free boundary (:class:`petgap.mechanics.free_half_space.FreeHalfSpace`) the hard
 wall runs ``pcg-pressure`` on the map: under load, under
@@ -45,6 +54,7 @@ from petsc4py import PETSc
 
 from petgap.mechanics.problem import Indentation, Load, MeanGap
 from petgap.solvers.free_boundary import solve_on_cell
+from petgap.solvers.mixed_precision import solve_mixed
 from petgap.solvers.pressure_cg import (full_contact_state, solve_mean_gap_by_indentation,
                                         touching_state)
 from petgap.solvers.tao import (PETGAP_TYPES, petsc_options, solve_load_by_mean_gap,
@@ -52,10 +62,12 @@ from petgap.solvers.tao import (PETGAP_TYPES, petsc_options, solve_load_by_mean_
 
 #: Solver types a scene may name.
 SOLVER_TYPES = ("pcg", "pcg-pressure", "pcg-gap", "bncg", "blmvm", "bqnls", "gpcg")
+#: Floating-point modes of a solve (``solver.precision`` of a scene).
+PRECISIONS = ("double", "single", "mixed")
 
 
 def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=10000,
-          initial=None, options=None, monitor=None):
+          initial=None, options=None, monitor=None, precision=None):
     """Solve one contact problem.
 
     Parameters
@@ -77,6 +89,9 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
         PETSc options (without the leading dash) set for this solve only.
     monitor : callable, optional
         ``monitor(iteration, residual)``, called on every rank.
+    precision : {"double", "single", "mixed"}, optional
+        Default: the grid's (``"double"`` or ``"single"``).  ``"mixed"`` needs a
+        double problem (see "Precision" above).
 
     Returns
     -------
@@ -94,6 +109,31 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
         raise ValueError(f"-tao_type {tao_type} is not supported; use one of {', '.join(SOLVER_TYPES)}")
     adhesive = problem.interaction.adhesive
     periodic = problem.half_space.periodic
+    grid_precision = getattr(problem.grid, "precision", "double")
+    precision = grid_precision if precision is None else precision
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision {precision!r} is not one of {', '.join(PRECISIONS)}")
+    if precision != "double":
+        if (precision == "mixed") != (grid_precision == "double"):
+            raise ValueError(f"precision {precision!r} on a {grid_precision}-precision grid: "
+                             f"single solves a problem on a single-precision grid, mixed one "
+                             f"on a double grid")
+        if adhesive or not periodic or tao_type not in ("pcg", "pcg-pressure") \
+                or not isinstance(control, (Load, MeanGap)):
+            raise ValueError(f"precision {precision!r} is for non-adhesive contact on a "
+                             f"periodic cell under load or mean gap, solved by pcg or "
+                             f"pcg-pressure (here: {'adhesive' if adhesive else 'hard wall'}, "
+                             f"{'periodic' if periodic else 'free boundary'}, {tao_type}, "
+                             f"{type(control).__name__}); use double precision")
+        tao_type = "pcg-pressure"
+    if precision == "mixed":
+        if isinstance(control, Load) and control.mean_pressure == 0:
+            return touching_state(problem, control)
+        with petsc_options(options):
+            coarse = PETSc.Options().getBool("petgap_coarse_start", True)
+        return solve_mixed(problem, control, tolerance=tolerance, max_iterations=max_iterations,
+                           monitor=monitor, coarse_start=coarse,
+                           initial_pressure=None if initial is None else initial.pressure)
     if not periodic and (adhesive or tao_type not in ("pcg", "pcg-pressure")):
         if isinstance(control, Indentation):
             raise ValueError("indentation control is for the hard wall with pcg or "

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
-from petgap.parallel._fftw_mpi import weighted_power
+from petgap.parallel.grid import weighted_power
 
 
 @dataclass(frozen=True)

@@ -65,7 +65,8 @@ def test_hard_wall_scene_builds_grid_problem_and_steps(comm):
     assert model.petsc_args == ["-tao_max_it", "400", "-tao_monitor"]
     assert model.options == {"tao_max_it": "400", "tao_monitor": ""}
     assert model.solve_options == {"solver": "pcg", "tolerance": 1e-7, "max_iterations": 500,
-                                   "options": model.options}
+                                   "options": model.options, "precision": "double"}
+    assert model.grid.precision == "double" and model.topography.dtype == np.float64
     assert stats.rms_slope == pytest.approx(0.1, rel=1e-9)
     # the same surface and problem on 1 and on all ranks
     np.testing.assert_array_equal(heights, serial.topography)
@@ -185,3 +186,28 @@ def test_non_square_pixels_from_the_file_are_solved(comm, mpi_tmp_path):
     np.testing.assert_allclose(whole, heights, rtol=1e-12)
     state = next(iter(model.sweep()))
     assert state.converged
+
+
+def test_single_precision_scene_solves_the_double_surface_rounded(comm):
+    """``solver.precision = "single"``: a single-precision grid and problem carrying the very
+    surface of the double scene (made in double, then rounded), solved to the single
+    tolerance with the contact set of the double solve; mixed solves a double problem."""
+    single = dict(SCENE, solver=dict(SCENE["solver"], precision="single", tolerance=1e-6))
+    mixed = dict(SCENE, solver=dict(SCENE["solver"], precision="mixed"))
+    models = [build(Scene.from_dict(s, comm), comm) for s in (SCENE, single, mixed)]
+    states = [list(m.sweep()) for m in models]
+    double_model, single_model, mixed_model = models
+    h64 = gather_all(double_model.grid, double_model.topography)
+    h32 = gather_all(single_model.grid, single_model.topography)
+
+    assert single_model.grid.precision == "single" and h32.dtype == np.float32
+    assert np.array_equal(h32, h64.astype(np.float32))
+    assert mixed_model.grid.precision == "double" and mixed_model.solve_options["precision"] \
+        == "mixed"
+    for ref, one, other in zip(*states):
+        assert ref.converged and one.converged and other.converged
+        assert (one.precision, other.precision) == ("single", "mixed")
+        assert one.kkt_gap <= 1e-6 and other.kkt_gap <= 1e-7
+        assert one.contact_fraction == pytest.approx(ref.contact_fraction, rel=2e-3)
+        assert other.contact_fraction == ref.contact_fraction
+        assert other.mean_gap == pytest.approx(ref.mean_gap, rel=1e-6)

@@ -149,6 +149,11 @@ def test_ladders_keep_the_physics(comm):
         assert r.scene.solver.tolerance == 1e-7
     # the scene's own grid is the rung 16 a0
     assert res[2].scene.grid == scene.grid
+    # an adhesive scene: only double precision solves it, and the ladder says why
+    prec = study.precision_ladder(scene)
+    assert [r.label for r in prec] == ["single", "mixed", "double"]
+    assert all(r.skipped and "non-adhesive" in r.skipped and r.scene is None for r in prec[:2])
+    assert prec[2].skipped is None and prec[2].scene.solver == scene.solver
     assert study.quantities_of(scene) == ["c", "d_rep", "mean_pressure", "exponent",
                                           "prefactor", "F_att"]
 
@@ -244,10 +249,19 @@ def test_cli_quick_writes_table_and_figure(comm, mpi_tmp_path, run_cli):
     assert "resolution ladder at tolerance 1e-08" in proc.stdout and "err c" in proc.stdout
     assert [(r["ladder"], r["rung"]) for r in rows] == [
         ("tolerance", "1e-04"), ("tolerance", "1e-06"), ("tolerance", "1e-08"),
-        ("resolution", "8 a0"), ("resolution", "16 a0"), ("resolution", "32 a0")]
-    assert [r["nx"] for r in rows[3:]] == ["32", "64", "128"]
-    assert [r["reference"] for r in rows] == ["False", "False", "True"] * 2
-    assert doc["references"] == {"tolerance": "1e-08", "resolution": "32 a0"}
+        ("resolution", "8 a0"), ("resolution", "16 a0"), ("resolution", "32 a0"),
+        ("precision", "single"), ("precision", "mixed"), ("precision", "double")]
+    assert [r["nx"] for r in rows[3:6]] == ["32", "64", "128"]
+    assert [r["reference"] for r in rows] == ["False", "False", "True"] * 3
+    assert doc["references"] == {"tolerance": "1e-08", "resolution": "32 a0",
+                                 "precision": "double"}
+    # single at its tolerance floor, mixed and double at the scene's; double is the
+    # tolerance ladder's 1e-08 solve, measured once
+    assert [(r["precision"], r["tolerance"]) for r in rows[6:]] == [
+        ("single", "1e-06"), ("mixed", "1e-08"), ("double", "1e-08")]
+    assert rows[8]["shared_with"] == "tolerance rung 1e-08"
+    assert all(r["converged"] == "True" and float(r["err_c"]) < 1e-3 for r in rows[6:8])
+    assert "precision ladder at tolerance 1e-08, 32 x 32" in proc.stdout
     assert doc["settings"]["surface_band"]["dropped_power"] < 1e-12  # round-off: see above
     assert png == b"\x89PNG\r\n\x1a\n"
     # an existing output is never overwritten without --overwrite

@@ -1,0 +1,475 @@
+# The precision-independent body of petgap's FFTW-MPI binding, included by
+# _fftw_mpi.pyx (double: real_t = double, FFTW's fftw_* functions) and by
+# _fftw_mpi_single.pyx (single: real_t = float, the same Cython names bound to
+# FFTW's fftwf_* functions), so that both precisions run the same source.
+# Wavevectors, multipliers and every sum stay in double in both.
+
+fftw_mpi_init()
+
+PLANNER_FLAGS = {"estimate": FFTW_ESTIMATE, "measure": FFTW_MEASURE,
+                 "patient": FFTW_PATIENT, "exhaustive": FFTW_EXHAUSTIVE}
+
+
+def local_size_transposed(MPI.Comm comm, Py_ssize_t n0, Py_ssize_t n1):
+    """Slab sizes of an ``n0 x n1`` r2c transform with transposed output.
+
+    Returns
+    -------
+    tuple of int
+        ``(alloc_local, local_n0, local_0_start, local_n1, local_1_start)``;
+        ``alloc_local`` counts complex numbers and bounds both the padded real
+        slab and the transposed Fourier slab of this rank.
+    """
+    cdef ptrdiff_t ln0 = 0, l0s = 0, ln1 = 0, l1s = 0, alloc
+    alloc = fftw_mpi_local_size_2d_transposed(n0, n1 // 2 + 1, comm.ob_mpi,
+                                              &ln0, &l0s, &ln1, &l1s)
+    return int(alloc), int(ln0), int(l0s), int(ln1), int(l1s)
+
+
+def export_wisdom(MPI.Comm comm):
+    """Gather the wisdom of all ranks onto rank 0 and return it as text there."""
+    fftw_mpi_gather_wisdom(comm.ob_mpi)
+    if comm.Get_rank() != 0:
+        return None
+    cdef char *s = fftw_export_wisdom_to_string()
+    if s == NULL:
+        return None
+    try:
+        return (<bytes>s).decode("ascii")
+    finally:
+        fftw_free(s)
+
+
+def import_wisdom(MPI.Comm comm, text):
+    """Import wisdom text given on rank 0 and broadcast it to every rank.
+
+    Returns True on every rank if rank 0 parsed the text.
+    """
+    cdef int ok = 0
+    if comm.Get_rank() == 0 and text:
+        data = text.encode("ascii")
+        ok = fftw_import_wisdom_from_string(data)
+    ok = comm.bcast(ok, root=0)
+    if ok:
+        fftw_mpi_broadcast_wisdom(comm.ob_mpi)
+    return bool(ok)
+
+
+cdef _check_plan_inputs(cnp.ndarray real, cnp.ndarray fourier, str planner):
+    """The checks both plan classes make before FFTW reads the buffers' memory."""
+    if planner not in PLANNER_FLAGS:
+        raise ValueError(f"planner={planner!r} is not one of {sorted(PLANNER_FLAGS)}")
+    if real.dtype != REAL_DTYPE or not real.flags.c_contiguous:
+        raise TypeError(f"real buffer must be C-contiguous {np.dtype(REAL_DTYPE).name}")
+    if fourier.dtype != COMPLEX_DTYPE or not fourier.flags.c_contiguous:
+        raise TypeError(f"fourier buffer must be C-contiguous {np.dtype(COMPLEX_DTYPE).name}")
+
+
+cdef inline void _destroy(fftw_plan *plan):
+    """Destroy a plan that may never have been made, and forget it."""
+    if plan[0] != NULL:
+        fftw_destroy_plan(plan[0])
+        plan[0] = NULL
+
+
+cdef class SlabPlans:
+    """Forward r2c and backward c2r FFTW-MPI plans on two caller-owned buffers.
+
+    Parameters
+    ----------
+    comm : mpi4py.MPI.Comm
+        Communicator of the slab decomposition (kept alive by this object).
+    n0, n1 : int
+        Logical real-space shape; ``n0`` is the distributed axis.
+    real : ndarray of the module's real type (:data:`REAL_DTYPE`), C-contiguous, at least ``2 * alloc_local`` values
+        Padded real slab; plans read and write it in place of any copy.
+    fourier : ndarray of :data:`COMPLEX_DTYPE`, C-contiguous, at least ``alloc_local`` values
+        Transposed Fourier slab.
+    planner : {"estimate", "measure", "patient", "exhaustive"}
+        FFTW planner effort.  Measuring overwrites both buffers.
+    """
+    cdef fftw_plan fwd
+    cdef fftw_plan bwd
+    cdef object comm, real, fourier
+
+    def __cinit__(self):
+        self.fwd = NULL
+        self.bwd = NULL
+
+    def __init__(self, MPI.Comm comm, Py_ssize_t n0, Py_ssize_t n1,
+                 cnp.ndarray real, cnp.ndarray fourier, str planner="measure"):
+        _check_plan_inputs(real, fourier, planner)
+        self.comm, self.real, self.fourier = comm, real, fourier
+        cdef unsigned flags = PLANNER_FLAGS[planner]
+        cdef real_t *r = <real_t *>cnp.PyArray_DATA(real)
+        cdef fftw_complex *c = <fftw_complex *>cnp.PyArray_DATA(fourier)
+        cdef MPI_Comm mcomm = comm.ob_mpi
+        with nogil:
+            self.fwd = fftw_mpi_plan_dft_r2c_2d(n0, n1, r, c, mcomm,
+                                                flags | FFTW_MPI_TRANSPOSED_OUT)
+            self.bwd = fftw_mpi_plan_dft_c2r_2d(n0, n1, c, r, mcomm,
+                                                flags | FFTW_MPI_TRANSPOSED_IN)
+        if self.fwd == NULL or self.bwd == NULL:
+            raise RuntimeError(f"FFTW-MPI could not plan a {n0} x {n1} transform")
+
+    def forward(self):
+        """Real slab -> Fourier slab (unnormalised, ``exp(-i q.x)``)."""
+        with nogil:
+            fftw_execute(self.fwd)
+
+    def backward(self):
+        """Fourier slab -> real slab (unnormalised, ``exp(+i q.x)``); destroys the Fourier slab."""
+        with nogil:
+            fftw_execute(self.bwd)
+
+    def __dealloc__(self):
+        _destroy(&self.fwd)
+        _destroy(&self.bwd)
+
+
+ctypedef int index_t  # numpy.int32, as in petgap/_contact_set.pyx: flat padded-slab indices
+
+#: Rows the sparse variants of :class:`ConvolutionPlans` assemble (or take
+#: apart) at a time in a small buffer that stays in cache.  A multiple of 8
+#: keeps every block's start in the Fourier slab 64-byte aligned (8 rows of
+#: ``nky`` complex values are ``128 nky`` bytes), as FFTW's new-array execute
+#: requires of the arrays a plan was made for.
+cdef enum:
+    BLOCK_ROWS = 8
+
+
+cdef inline void _block_sizes(Py_ssize_t rows, int sizes[2]) noexcept:
+    """Row counts of the two block plans for ``rows`` rows: a full block, and the remainder.
+
+    ``sizes[0] = min(BLOCK_ROWS, rows)``; ``sizes[1]`` is the last, partial
+    block's size, or 0 when there is none.
+    """
+    sizes[0] = <int>min(<Py_ssize_t>BLOCK_ROWS, rows)
+    sizes[1] = <int>(rows % BLOCK_ROWS) if rows > BLOCK_ROWS else 0
+
+
+cdef inline int _block(Py_ssize_t start, Py_ssize_t rows, Py_ssize_t full,
+                       Py_ssize_t *m) noexcept nogil:
+    """The block of rows from ``start``: its size in ``m``, and which plan takes it.
+
+    Plan 0 takes ``full = min(BLOCK_ROWS, rows)`` rows, plan 1 the remainder.
+    """
+    m[0] = min(<Py_ssize_t>BLOCK_ROWS, rows - start)
+    return 0 if m[0] == full else 1
+
+
+cdef class ConvolutionPlans:
+    """``x <- F^{-1} [scale |q|^power F x]`` in the padded real slab, in one sweep.
+
+    The elastic operators are Fourier multipliers, and applying one with the two
+    2D plans of :class:`SlabPlans` streams the Fourier slab through memory three
+    more times than needed (the last 1D pass of the forward transform, the
+    multiplication, the first 1D pass of the backward transform).  Here the 2D
+    transforms are taken apart the way FFTW-MPI builds them (FFTW manual 6.4.3):
+    1D r2c transforms along the local rows, a global transpose, 1D transforms
+    along the rows of the transposed slab, and the reverse.  The middle stage is
+    fused a few rows at a time -- forward 1D transforms, multiplication,
+    backward 1D transforms on ``BLOCK_ROWS`` rows held in cache, in place -- so
+    that the Fourier slab is read and written once there instead of three
+    times.  The transposed layout and the
+    normalisation are those of :class:`SlabPlans` (unnormalised; the caller's
+    ``scale`` folds in ``1 / (n0 n1)``), and the q = 0 mode is set to zero.
+
+    Taken apart, the first and last stages can also meet a field that lives
+    on a few points only (:meth:`apply_sparse`): the rows of the input are
+    assembled a block at a time from index lists in a buffer held in cache,
+    instead of being written to the slab and read back, and the output is
+    written where the caller wants it or gathered on those points alone.
+
+    Parameters are those of :class:`SlabPlans` plus the local row counts
+    ``local_n0`` (real rows) and ``local_n1`` (transposed Fourier rows), both
+    positive (see :func:`local_size_transposed`).  The real buffer is the input
+    and the output; the Fourier buffer is scratch.  Planning with an effort
+    above ``"estimate"`` overwrites both buffers.
+    """
+    cdef fftw_plan rows_fwd
+    cdef fftw_plan rows_bwd
+    cdef fftw_plan transpose_fwd
+    cdef fftw_plan transpose_bwd
+    cdef fftw_plan lines_fwd[2]   # BLOCK_ROWS lines of the transposed slab, and the rest
+    cdef fftw_plan lines_bwd[2]
+    cdef fftw_plan block_fwd[2]   # BLOCK_ROWS rows, and the remainder (or NULL)
+    cdef fftw_plan block_bwd[2]
+    cdef real_t *block
+    cdef real_t *real_data
+    cdef fftw_complex *fourier_data
+    cdef Py_ssize_t n0, ln0, ln1, nky
+    cdef int block_rows[2], block_lines[2]   # rows of the plans [0] and [1] (_block_sizes)
+    cdef object comm, real, fourier
+
+    def __cinit__(self):
+        self.rows_fwd = self.rows_bwd = NULL
+        self.transpose_fwd = self.transpose_bwd = NULL
+        self.lines_fwd[0] = self.lines_fwd[1] = NULL
+        self.lines_bwd[0] = self.lines_bwd[1] = NULL
+        self.block_fwd[0] = self.block_fwd[1] = NULL
+        self.block_bwd[0] = self.block_bwd[1] = NULL
+        self.block = NULL
+
+    def __init__(self, MPI.Comm comm, Py_ssize_t n0, Py_ssize_t n1, Py_ssize_t local_n0,
+                 Py_ssize_t local_n1, cnp.ndarray real, cnp.ndarray fourier,
+                 str planner="measure"):
+        _check_plan_inputs(real, fourier, planner)
+        if local_n0 <= 0 or local_n1 <= 0:
+            raise ValueError("every rank needs at least one real and one Fourier row")
+        self.comm, self.real, self.fourier = comm, real, fourier
+        self.n0, self.ln0, self.ln1 = n0, local_n0, local_n1
+        self.nky = n1 // 2 + 1
+        _block_sizes(local_n0, self.block_rows)
+        _block_sizes(local_n1, self.block_lines)
+        cdef unsigned flags = PLANNER_FLAGS[planner]
+        cdef int n = <int>n1
+        cdef int nky = <int>(n1 // 2 + 1)
+        cdef int howmany = <int>local_n0
+        cdef int line_length = <int>n0
+        cdef int *rows = self.block_rows
+        cdef MPI_Comm mcomm = comm.ob_mpi
+        self.real_data = <real_t *>cnp.PyArray_DATA(real)
+        self.fourier_data = <fftw_complex *>cnp.PyArray_DATA(fourier)
+        cdef int *lines = self.block_lines
+        cdef fftw_complex *transposed = <fftw_complex *>self.real_data
+        self.block = <real_t *>fftw_malloc(BLOCK_ROWS * 2 * nky * sizeof(real_t))
+        if self.block == NULL:
+            raise MemoryError("no memory for a block of rows")
+        with nogil:
+            # real (local_n0, 2 nky) reals -> fourier (local_n0, nky) complex
+            self.rows_fwd = fftw_plan_many_dft_r2c(1, &n, howmany, self.real_data, NULL, 1,
+                                                   2 * nky, self.fourier_data, NULL, 1, nky,
+                                                   flags)
+            # fourier (n0 x nky, by rows) -> real buffer as complex (nky x n0, by rows)
+            self.transpose_fwd = fftw_mpi_plan_many_transpose(
+                n0, nky, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
+                <real_t *>self.fourier_data, self.real_data, mcomm, flags)
+            # BLOCK_ROWS rows of the transposed slab at a time, in place
+            for k in range(2):
+                if lines[k] > 0:
+                    self.lines_fwd[k] = fftw_plan_many_dft(
+                        1, &line_length, lines[k], transposed, NULL, 1, line_length,
+                        transposed, NULL, 1, line_length, FFTW_FORWARD, flags)
+                    self.lines_bwd[k] = fftw_plan_many_dft(
+                        1, &line_length, lines[k], transposed, NULL, 1, line_length,
+                        transposed, NULL, 1, line_length, FFTW_BACKWARD, flags)
+            self.transpose_bwd = fftw_mpi_plan_many_transpose(
+                nky, n0, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
+                self.real_data, <real_t *>self.fourier_data, mcomm, flags)
+            self.rows_bwd = fftw_plan_many_dft_c2r(1, &n, howmany, self.fourier_data, NULL, 1,
+                                                   nky, self.real_data, NULL, 1, 2 * nky,
+                                                   flags | FFTW_DESTROY_INPUT)
+            # The same row stages on a block of rows held in self.block (same
+            # padded layout), executed on the Fourier rows of each block in turn.
+            for k in range(2):
+                if rows[k] > 0:
+                    self.block_fwd[k] = fftw_plan_many_dft_r2c(
+                        1, &n, rows[k], self.block, NULL, 1, 2 * nky, self.fourier_data, NULL,
+                        1, nky, flags)
+                    self.block_bwd[k] = fftw_plan_many_dft_c2r(
+                        1, &n, rows[k], self.fourier_data, NULL, 1, nky, self.block, NULL, 1,
+                        2 * nky, flags | FFTW_DESTROY_INPUT)
+        if (self.rows_fwd == NULL or self.rows_bwd == NULL or self.transpose_fwd == NULL
+                or self.transpose_bwd == NULL
+                or self.lines_fwd[0] == NULL or self.lines_bwd[0] == NULL
+                or (lines[1] > 0 and (self.lines_fwd[1] == NULL or self.lines_bwd[1] == NULL))
+                or self.block_fwd[0] == NULL or self.block_bwd[0] == NULL
+                or (rows[1] > 0 and (self.block_fwd[1] == NULL or self.block_bwd[1] == NULL))):
+            raise RuntimeError(f"FFTW-MPI could not plan a {n0} x {n1} convolution")
+
+    cdef int _check_multiplier(self, const double[::1] qx, const double[::1] qy,
+                               int power) except -1:
+        if qx.shape[0] != self.n0 or qy.shape[0] != self.ln1:
+            raise ValueError("wavevector arrays do not match the Fourier slab")
+        if power != 1 and power != -1:
+            raise ValueError("power must be +1 or -1")
+        return 0
+
+    cdef void _middle(self, const double *qx, const double *qy, double scale,
+                      int power) noexcept nogil:
+        """Fourier rows -> (transpose, 1D transforms and multiplier, transpose) -> Fourier rows.
+
+        The rows of the transposed slab are transformed in place, BLOCK_ROWS
+        at a time (in cache), multiplied, and transformed back.
+        """
+        cdef Py_ssize_t i, j, j0, m, n0 = self.n0
+        cdef double qyj, f
+        cdef real_t *s
+        cdef fftw_complex *rows
+        cdef int which
+        fftw_execute(self.transpose_fwd)
+        j0 = 0
+        while j0 < self.ln1:
+            which = _block(j0, self.ln1, self.block_lines[0], &m)
+            rows = (<fftw_complex *>self.real_data) + j0 * n0
+            fftw_execute_dft(self.lines_fwd[which], rows, rows)
+            for j in range(j0, j0 + m):
+                s = <real_t *>((<fftw_complex *>self.real_data) + j * n0)
+                qyj = qy[j] * qy[j]
+                if power == 1:
+                    for i in range(n0):
+                        f = scale * sqrt(qx[i] * qx[i] + qyj)
+                        s[2 * i] = s[2 * i] * f
+                        s[2 * i + 1] = s[2 * i + 1] * f
+                else:
+                    for i in range(n0):
+                        f = scale / sqrt(qx[i] * qx[i] + qyj)
+                        s[2 * i] = s[2 * i] * f
+                        s[2 * i + 1] = s[2 * i + 1] * f
+                if qyj == 0.0:
+                    for i in range(n0):
+                        if qx[i] == 0.0:
+                            s[2 * i] = 0.0
+                            s[2 * i + 1] = 0.0
+            fftw_execute_dft(self.lines_bwd[which], rows, rows)
+            j0 += BLOCK_ROWS
+        fftw_execute(self.transpose_bwd)
+
+    def apply(self, const double[::1] qx, const double[::1] qy, double scale, int power):
+        """Multiply by ``scale |q|^power`` (``power`` +1 or -1) between the transforms."""
+        self._check_multiplier(qx, qy, power)
+        with nogil:
+            fftw_execute(self.rows_fwd)
+            self._middle(&qx[0], &qy[0], scale, power)
+            fftw_execute(self.rows_bwd)
+
+    def apply_sparse(self, const index_t[::1] pidx, const real_t[::1] values,
+                     const double[::1] qx, const double[::1] qy, double scale, int power,
+                     real_t[:, ::1] out=None, real_t[::1] gathered=None):
+        """The convolution of a field that is zero except at the points ``pidx``.
+
+        Parameters
+        ----------
+        pidx : int32 array, sorted ascending
+            Flat indices of the points into this rank's padded real slab
+            (``local_n0 x 2 (n1 // 2 + 1)``, row-major).
+        values : array of the module's real type, ``len(pidx)``
+            The field at those points.
+        qx, qy, scale, power
+            The multiplier, as in :meth:`apply`.
+        out : array of the module's real type, padded slab shape, optional
+            Where the result goes (default: the real buffer).  It must be
+            aligned like the real buffer (``grid.aligned_padded()`` is);
+            its padding columns are left as they are.
+        gathered : array of the module's real type, ``len(pidx)``, optional
+            Instead of a whole slab, only the result at the points ``pidx``
+            (``out`` is then left untouched).  Both FFT buffers are scratch
+            in every case: the transposes go through the real one.
+
+        The input is assembled ``BLOCK_ROWS`` rows at a time in a buffer that
+        stays in cache and transformed from there; a gathered output is taken
+        apart the same way.  Neither the slab-sized zeroing and scatter of the
+        input nor the slab-sized write of the output goes through memory.
+        """
+        self._check_multiplier(qx, qy, power)
+        cdef Py_ssize_t ns = pidx.shape[0], pw = 2 * self.nky, ln0 = self.ln0
+        cdef Py_ssize_t i0, k, m, base, end
+        cdef int which
+        cdef real_t *target = self.real_data
+        cdef real_t *g = NULL
+        cdef bint ok = True
+        cdef bint gather = gathered is not None
+        if values.shape[0] != ns or (gather and gathered.shape[0] != ns):
+            raise ValueError("pidx, values and gathered must have the same length")
+        if out is not None:
+            if out.shape[0] != ln0 or out.shape[1] != pw:
+                raise ValueError(f"out has shape {tuple(out.shape)[:2]}, the padded slab is "
+                                 f"({ln0}, {pw})")
+            target = &out[0, 0]
+            if fftw_alignment_of(target) != fftw_alignment_of(self.real_data):
+                raise ValueError("out is not aligned like the real FFT buffer")
+        if gather and ns > 0:
+            g = &gathered[0]
+        with nogil:
+            k = 0
+            i0 = 0
+            while i0 < ln0:
+                which = _block(i0, ln0, self.block_rows[0], &m)
+                base = i0 * pw
+                end = base + m * pw
+                memset(self.block, 0, m * pw * sizeof(real_t))
+                while k < ns and pidx[k] < end:
+                    if pidx[k] < base:
+                        ok = False  # unsorted or negative: reported below
+                        break
+                    self.block[pidx[k] - base] = values[k]
+                    k += 1
+                fftw_execute_dft_r2c(self.block_fwd[which], self.block,
+                                     self.fourier_data + i0 * self.nky)
+                i0 += BLOCK_ROWS
+            ok = ok and k == ns
+            # The middle stage is collective (the transposes): every rank runs
+            # it, valid input or not, so that a bad index list raises on its
+            # rank instead of leaving the others waiting in a transpose.
+            self._middle(&qx[0], &qy[0], scale, power)
+            if ok and not gather:
+                fftw_execute_dft_c2r(self.rows_bwd, self.fourier_data, target)
+            elif ok and ns > 0:
+                k = 0
+                i0 = 0
+                while i0 < ln0:
+                    which = _block(i0, ln0, self.block_rows[0], &m)
+                    base = i0 * pw
+                    end = base + m * pw
+                    fftw_execute_dft_c2r(self.block_bwd[which],
+                                         self.fourier_data + i0 * self.nky, self.block)
+                    while k < ns and pidx[k] < end:
+                        g[k] = self.block[pidx[k] - base]
+                        k += 1
+                    i0 += BLOCK_ROWS
+        if not ok:
+            raise ValueError("pidx must be sorted ascending and inside this rank's padded slab")
+
+    def __dealloc__(self):
+        _destroy(&self.rows_fwd)
+        _destroy(&self.rows_bwd)
+        _destroy(&self.transpose_fwd)
+        _destroy(&self.transpose_bwd)
+        for k in range(2):
+            _destroy(&self.lines_fwd[k])
+            _destroy(&self.lines_bwd[k])
+            _destroy(&self.block_fwd[k])
+            _destroy(&self.block_bwd[k])
+        if self.block != NULL:
+            fftw_free(self.block)
+
+
+def weighted_power(const complex_t[:, ::1] c, const double[::1] qx,
+                   const double[::1] qy, const double[::1] wrow, int power):
+    """``sum_j wrow[j] sum_i |c[j, i]|**2 |q|**power`` over this rank's Fourier slab.
+
+    ``wrow`` holds the Hermitian multiplicity of each half-plane row (1 for
+    ``ky = 0`` and the Nyquist row of an even ``ny``, 2 otherwise), so that the
+    sum over the half plane equals the sum over the full plane.  Terms with
+    ``|q| = 0`` contribute only when ``power == 0``.
+    """
+    cdef Py_ssize_t i, j, nj = c.shape[0], ni = c.shape[1]
+    cdef double q2, a, rowsum, total = 0.0, qyj, re, im
+    if power not in (-1, 0, 1, 2, 4):
+        raise ValueError(f"power={power} is not one of -1, 0, 1, 2, 4")
+    if qx.shape[0] != ni or qy.shape[0] != nj or wrow.shape[0] != nj:
+        raise ValueError("wavevector or weight arrays do not match the Fourier slab")
+    with nogil:
+        for j in range(nj):
+            qyj = qy[j] * qy[j]
+            rowsum = 0.0
+            for i in range(ni):
+                re = c[j, i].real  # in double whatever the slab's precision
+                im = c[j, i].imag
+                a = re * re + im * im
+                if power == 0:
+                    rowsum = rowsum + a
+                else:
+                    q2 = qx[i] * qx[i] + qyj
+                    if q2 > 0.0:
+                        if power == 1:
+                            rowsum = rowsum + a * sqrt(q2)
+                        elif power == 2:
+                            rowsum = rowsum + a * q2
+                        elif power == 4:
+                            rowsum = rowsum + a * q2 * q2
+                        elif power == -1:
+                            rowsum = rowsum + a / sqrt(q2)
+            total = total + wrow[j] * rowsum
+    return total
