@@ -1,13 +1,12 @@
 #!/usr/bin/env python3
-"""Run a scene too large for ``petgap run``'s memory estimate, and record its peak memory.
+"""Run a scene as ``petgap run`` does, and report its peak memory per grid point.
 
-``petgap run`` refuses a grid whose estimated peak (``BYTES_PER_POINT_SOLVE`` = 90 bytes per
-point, the conservative figure of docs/benchmarks.md) exceeds the memory available;
-16384^2 (2.7e8 points) needs 24 GB by that figure, beside 23 GB here.  A one-rank run of
-2048^2 measured 59 bytes per point above the process's fixed 91 MB (sampled RSS), so this
-driver runs the scene exactly as ``petgap run`` does (:func:`petgap.run_scene`, same
-provenance, same result file) with the estimate set to ``--bytes-per-point`` (default 64),
-and prints the peak RSS per point at the end.
+For the large scenes whose memory is a measurement of its own (the bytes per point of
+docs/benchmarks.md): the run is :func:`petgap.run_scene` (same provenance, same result
+file as ``petgap run``), and at the end the peak resident memory summed over the ranks
+is printed, per point above the fixed 91 MB of a process.  ``--bytes-per-point``
+replaces ``petgap run``'s estimate of the peak (``petgap.app.build``, used to refuse a
+grid that will not fit) when the estimate is known to be too high for a scene.
 
 Usage (one rank; under mpirun for more)::
 
@@ -27,10 +26,14 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("scene")
     parser.add_argument("output")
-    parser.add_argument("--bytes-per-point", type=int, default=64)
+    parser.add_argument("--bytes-per-point", type=int, default=None,
+                        help="the memory estimate of every solve, bytes per point")
     args = parser.parse_args()
     comm = MPI.COMM_WORLD
-    build.BYTES_PER_POINT_SOLVE = args.bytes_per_point
+    if args.bytes_per_point is not None:
+        for name in ("BYTES_PER_POINT_PRESSURE", "BYTES_PER_POINT_PRESSURE_SINGLE",
+                     "BYTES_PER_POINT_SOLVE"):
+            setattr(build, name, args.bytes_per_point)
     scene = petgap.load_scene(args.scene, comm)
     petgap.run_scene(scene, comm, args.output)
     peak = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)

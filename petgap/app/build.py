@@ -18,6 +18,7 @@ A scene made in code works as one read from a file::
 import contextlib
 import dataclasses
 import functools
+import gc
 import math
 import resource
 from dataclasses import dataclass, field
@@ -162,8 +163,13 @@ def check_options(scene, petsc_args=(), strict=False, log=None):
 
 
 #: Peak bytes per grid point of a run, for the estimate before anything is allocated
-#: (docs/benchmarks.md, "Memory per point": 62-84 measured for a pcg-pressure solve,
-#: 87 at 8192^2; a surface-only run holds the FFT buffers and the topography).
+#: (docs/benchmarks.md, "Memory per point"): the pressure solver (hard wall, periodic,
+#: pcg or pcg-pressure) in double or mixed precision, and in single; every other solve
+#: (adhesion, the solvers on the gap); a surface-only run (the FFT buffers and the
+#: topography).  Each is a measured whole run's peak with a margin for small grids,
+#: whose fixed costs weigh more.
+BYTES_PER_POINT_PRESSURE = 64
+BYTES_PER_POINT_PRESSURE_SINGLE = 48
 BYTES_PER_POINT_SOLVE = 90
 BYTES_PER_POINT_SURFACE = 40
 #: The same for a free boundary: the hard wall adds the padded cell's FFT buffers and
@@ -209,7 +215,9 @@ def check_size(scene, comm, solve=True):
 
     A :class:`~petgap.io.scene.SceneError` naming ``grid.nx``/``grid.ny`` if a
     rank's slab exceeds the kernels' 32-bit index range, or if the estimated
-    peak memory of a rank (:data:`BYTES_PER_POINT_SOLVE`, on a free boundary
+    peak memory of a rank (:data:`BYTES_PER_POINT_PRESSURE` or
+    :data:`BYTES_PER_POINT_PRESSURE_SINGLE` for the pressure solver,
+    :data:`BYTES_PER_POINT_SOLVE` for other solves, on a free boundary
     :data:`BYTES_PER_POINT_FREE` or :data:`BYTES_PER_POINT_FREE_ADHESIVE`, or
     :data:`BYTES_PER_POINT_SURFACE` per point of its slab) exceeds what it
     has: its share of the node's MemAvailable or what its address-space
@@ -229,6 +237,10 @@ def check_size(scene, comm, solve=True):
             f"rank{'s' if size > 1 else ''} is beyond the {MAX_SLAB_POINTS} points petgap's "
             f"kernels can index; allowed: at most {most_rows} rows of {ny} per rank: {fix}")
     per_point = BYTES_PER_POINT_SOLVE if solve else BYTES_PER_POINT_SURFACE
+    if solve and scene.interaction.kind == "hard-wall" and scene.solver.tao_type in \
+            ("pcg", "pcg-pressure") and scene.control.reference != "non-adhesive":
+        per_point = (BYTES_PER_POINT_PRESSURE_SINGLE if scene.solver.precision == "single"
+                     else BYTES_PER_POINT_PRESSURE)
     if solve and not scene.surface.periodic:
         per_point = (BYTES_PER_POINT_FREE if scene.interaction.kind == "hard-wall"
                      else BYTES_PER_POINT_FREE_ADHESIVE)
@@ -386,9 +398,11 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
         # run's (its random numbers are drawn in double), so that the two compare.
         with _timed(log, "making the surface (in double, then rounded to single)"):
             scratch = make_grid(scene, comm, planner="estimate")
-            topography = (surface(scratch) if surface is not None
-                          else make_surface(scene, scratch)).astype(np.float32)
-            del scratch
+            heights = surface(scratch) if surface is not None else make_surface(scene, scratch)
+            del scratch   # its buffers go before the rounded copy is made
+            gc.collect()  # (the grid's plans and buffers may sit in a reference cycle)
+            topography = heights.astype(np.float32)
+            del heights
         with _timed(log, f"planning FFTs ({scene.solver.planner}, single precision)"):
             grid = make_grid(scene, comm, precision="single")
     else:

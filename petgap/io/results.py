@@ -12,7 +12,8 @@ Layout
     ``petsc_options``), and ``complete``: False from creation until
     :meth:`ResultFile.close` succeeds.
 ``/<field>`` (e.g. ``topography``)
-    Global ``(nx, ny)`` float64 datasets, axis 0 = x, written by hyperslabs of
+    Global ``(nx, ny)`` float64 datasets (float32 for the fields of a single-precision
+    run), axis 0 = x, written by hyperslabs of
     rows, one per rank (``grid.x_slice``), in one collective call.
 ``/step_0000``, ``/step_0001``, ...
     One group per sweep step: its fields, its attributes (statistics, solver
@@ -334,13 +335,16 @@ def _slab_spaces(dset, grid):
 
 
 def write_field(group, name, grid, local_array):
-    """Write a distributed field as the global ``(nx, ny)`` float64 dataset ``group[name]``.
+    """Write a distributed field as the global ``(nx, ny)`` dataset ``group[name]``.
 
     Collective: every rank of the file's communicator calls it, with its
     ``grid.local_shape`` slab; each writes its rows ``grid.x_slice`` in one
-    collective MPI-IO call (a rank without rows still takes part).  A slab that
-    is not C-contiguous float64 (e.g. a view of the FFT buffer) is copied first.
-    Returns the dataset.
+    collective MPI-IO call (a rank without rows still takes part).  The dataset
+    is float32 for a float32 slab (a single-precision run's fields: stored as
+    solved, without a double copy of the slab at the write) and float64
+    otherwise; :func:`read_field` reads either into float64.  A slab that is
+    not C-contiguous in that type (e.g. a view of the FFT buffer) is copied
+    first.  Returns the dataset.
     """
     local = np.asarray(local_array)
     if local.shape != tuple(grid.local_shape):
@@ -348,10 +352,11 @@ def write_field(group, name, grid, local_array):
                          f"the grid's slab is {tuple(grid.local_shape)}")
     dcpl = h5p.create(h5p.DATASET_CREATE)
     dcpl.set_fill_time(h5d.FILL_TIME_NEVER)  # every element is written below: no fill pass
-    dset = group.create_dataset(name, shape=tuple(grid.shape), dtype="f8", dcpl=dcpl)
+    dtype = np.float32 if local.dtype == np.float32 else np.float64
+    dset = group.create_dataset(name, shape=tuple(grid.shape), dtype=dtype, dcpl=dcpl)
     rows, fspace, mspace = _slab_spaces(dset, grid)
-    buf = np.ascontiguousarray(local, dtype=np.float64) if rows > 0 \
-        else np.zeros((1, grid.shape[1]))
+    buf = np.ascontiguousarray(local, dtype=dtype) if rows > 0 \
+        else np.zeros((1, grid.shape[1]), dtype=dtype)
     dset.id.write(mspace, fspace, buf, dxpl=_xfer(dset))
     return dset
 
@@ -379,6 +384,7 @@ def read_field(h5, name, grid, out=None):
 
     ``h5`` is a file or group opened on the grid's communicator; ``out`` an
     optional C-contiguous float64 array of ``grid.local_shape`` to read into.
+    A float32 dataset (a single-precision run's) is converted by HDF5 on the way.
     """
     dset = h5[name]
     if tuple(dset.shape) != tuple(grid.shape):

@@ -211,3 +211,23 @@ def test_single_precision_scene_solves_the_double_surface_rounded(comm):
         assert one.contact_fraction == pytest.approx(ref.contact_fraction, rel=2e-3)
         assert other.contact_fraction == ref.contact_fraction
         assert other.mean_gap == pytest.approx(ref.mean_gap, rel=1e-6)
+
+
+def test_single_precision_run_stores_its_fields_in_32_bits(comm, mpi_tmp_path):
+    """A single-precision run's fields are written as float32 datasets (no double copy at
+    the write, half the file), with the step's precision; they read back into float64."""
+    import h5py  # deferred: the only test here that reads a result file
+    from petgap.app import run_scene
+    from petgap.io.results import read_field
+    single = dict(SCENE, solver=dict(SCENE["solver"], precision="single", tolerance=1e-6))
+    scene = Scene.from_dict(single, comm)
+    out = mpi_tmp_path / "single.h5"
+    run_scene(scene, comm, out)
+    model = build(scene, comm)
+    with h5py.File(out, "r", driver="mpio", comm=comm) as f:
+        dtypes = [f[name].dtype for name in ("topography", "step_0000/gap",
+                                               "step_0000/pressure")]
+        precision = f["step_0000"].attrs["solution.precision"]
+        h = read_field(f, "topography", model.grid)
+    assert dtypes == [np.float32] * 3 and precision == "single"
+    assert h.dtype == np.float64 and np.array_equal(h, model.topography.astype(np.float64))

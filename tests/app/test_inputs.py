@@ -15,7 +15,8 @@ import pytest
 
 from conftest import clean_env, wait_for_root
 from conftest import write_shared as write
-from petgap.app.build import (BYTES_PER_POINT_FREE, BYTES_PER_POINT_SOLVE, check_options,
+from petgap.app.build import (BYTES_PER_POINT_FREE, BYTES_PER_POINT_PRESSURE,
+                              BYTES_PER_POINT_PRESSURE_SINGLE, BYTES_PER_POINT_SOLVE, check_options,
                               check_size)
 from petgap.io.scene import Scene, SceneError
 from petgap.solvers.tao import check_petsc_options
@@ -129,11 +130,16 @@ def test_memory_estimate_refuses_what_cannot_fit(comm):
     with pytest.raises(SceneError) as info:
         check_size(scene, comm)
     message = str(info.value)
-    gib = 32768 * 32768 // comm.size * BYTES_PER_POINT_SOLVE / 2**30
+    gib = 32768 * 32768 // comm.size * BYTES_PER_POINT_PRESSURE / 2**30
     assert f"needs about {gib:.3g} GiB per rank" in message, message
     assert "MemAvailable" in message and "more ranks" in message and "smaller grid" in message
     small = Scene.from_text(SCENE.format(solver=""), comm)
-    assert check_size(small, comm) == 32 * 32 // comm.size * BYTES_PER_POINT_SOLVE
+    assert check_size(small, comm) == 32 * 32 // comm.size * BYTES_PER_POINT_PRESSURE
+    # the pressure solver in single precision, and the solvers on the gap
+    single = Scene.from_text(SCENE.format(solver='precision = "single"\ntolerance = 1e-6'), comm)
+    assert check_size(single, comm) == 32 * 32 // comm.size * BYTES_PER_POINT_PRESSURE_SINGLE
+    gap = Scene.from_text(SCENE.format(solver='tao_type = "bncg"'), comm)
+    assert check_size(gap, comm) == 32 * 32 // comm.size * BYTES_PER_POINT_SOLVE
     # a free boundary adds the padded cell (and solves adhesion on it)
     text = SCENE.format(solver="")
     assert "[surface]\n" in text
