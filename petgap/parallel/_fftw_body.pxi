@@ -2,7 +2,16 @@
 # _fftw_mpi.pyx (double: real_t = double, FFTW's fftw_* functions) and by
 # _fftw_mpi_single.pyx (single: real_t = float, the same Cython names bound to
 # FFTW's fftwf_* functions), so that both precisions run the same source.
-# Wavevectors, multipliers and every sum stay in double in both.
+# Wavevectors, multipliers and every sum stay in double in both.  Each module
+# cimports MPI_Comm and declares FFTW's functions and real_t/complex_t before
+# including this, and defines REAL_DTYPE/COMPLEX_DTYPE after it.
+from libc.math cimport sqrt
+from libc.string cimport memcpy, memset
+from mpi4py cimport MPI
+cimport numpy as cnp
+import numpy as np
+
+cnp.import_array()
 
 fftw_mpi_init()
 

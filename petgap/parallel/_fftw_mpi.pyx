@@ -15,14 +15,7 @@ Fourier array is ``(n1 // 2 + 1) x n0`` complex values, distributed over its
 first axis.  Transforms are unnormalised: forward then backward multiplies by
 ``n0 * n1``.
 """
-from libc.math cimport sqrt
-from libc.string cimport memcpy, memset
 from mpi4py.libmpi cimport MPI_Comm
-from mpi4py cimport MPI
-cimport numpy as cnp
-import numpy as np
-
-cnp.import_array()
 
 cdef extern from "fftw3-mpi.h" nogil:
     ctypedef double fftw_complex[2]
@@ -72,9 +65,9 @@ cdef extern from "fftw3-mpi.h" nogil:
 
 ctypedef double real_t
 ctypedef double complex complex_t
+
+include "_fftw_body.pxi"
+
 #: dtypes of the real and Fourier buffers this module's plans take.
 REAL_DTYPE = np.float64
 COMPLEX_DTYPE = np.complex128
-
-
-include "_fftw_body.pxi"

@@ -9,14 +9,7 @@ Wavevectors, multipliers and every sum are double in both.  FFTW keeps the wisdo
 each precision apart, so :func:`export_wisdom` and :func:`import_wisdom` here carry
 single-precision wisdom only.
 """
-from libc.math cimport sqrt
-from libc.string cimport memcpy, memset
 from mpi4py.libmpi cimport MPI_Comm
-from mpi4py cimport MPI
-cimport numpy as cnp
-import numpy as np
-
-cnp.import_array()
 
 cdef extern from "fftw3-mpi.h" nogil:
     ctypedef float fftw_complex "fftwf_complex" [2]
@@ -72,9 +65,9 @@ cdef extern from "fftw3-mpi.h" nogil:
 
 ctypedef float real_t
 ctypedef float complex complex_t
+
+include "_fftw_body.pxi"
+
 #: dtypes of the real and Fourier buffers this module's plans take.
 REAL_DTYPE = np.float32
 COMPLEX_DTYPE = np.complex64
-
-
-include "_fftw_body.pxi"
