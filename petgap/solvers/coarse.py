@@ -104,17 +104,19 @@ def restrict(grid, coarse, field, f):
     return out
 
 
-def prolong(coarse, grid, field, f):
+def prolong(first_row, grid, field, f):
     """``field`` (this rank's coarse slab) repeated over each block, on this rank's fine slab.
 
-    Only ``coarse.x_slice`` is read of the coarse grid.  Written row by row into
-    the result: no fine-slab temporaries besides it.
+    ``first_row`` is the global coarse row the slab starts at (the coarse grid's
+    ``x_slice.start``): all that is needed of the coarse grid, which the caller
+    may then free before the fine field is made.  Written row by row into the
+    result: no fine-slab temporaries besides it.
     """
     m = grid.local_shape[0]
     x0 = grid.x_slice.start
     lo, hi = x0 // f, (x0 + m - 1) // f + 1
     rows = np.empty((hi - lo, field.shape[1]), dtype=field.dtype)
-    for row, piece in move_rows(grid.comm, field, coarse.x_slice.start, lo, hi):
+    for row, piece in move_rows(grid.comm, field, first_row, lo, hi):
         rows[row - lo:row - lo + len(piece)] = piece
     out = np.empty(grid.local_shape, dtype=field.dtype)
     for i in range(m):

@@ -450,17 +450,10 @@ def coarse_start_pressure(problem, control, tolerance, max_iterations):
     if not finite:
         return None, description + " (NaN: not used)"
     factor = problem.grid.nx // cgrid.nx
-    rows = cgrid.x_slice
+    first_row = cgrid.x_slice.start
     # the coarse problem, grid and solution go before the fine field is made
     del solution, coarse_problem, cgrid
-    return coarse.prolong(_Rows(rows), problem.grid, pressure, factor), description
-
-
-class _Rows:
-    """The coarse grid's rows, all :func:`petgap.solvers.coarse.prolong` reads of it."""
-
-    def __init__(self, x_slice):
-        self.x_slice = x_slice
+    return coarse.prolong(first_row, problem.grid, pressure, factor), description
 
 
 def full_contact_load(problem):

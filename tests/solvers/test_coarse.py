@@ -47,7 +47,7 @@ def test_restriction_and_prolongation_match_numpy(comm, shape, f):
     means = restrict(grid, coarse, grid.local_part(full).copy(), f)
     expected = full.reshape(shape[0] // f, f, shape[1] // f, f).mean(axis=(1, 3))
     coarse_field = rng.standard_normal(coarse.shape)
-    fine = prolong(coarse, grid, coarse.local_part(coarse_field).copy(), f)
+    fine = prolong(coarse.x_slice.start, grid, coarse.local_part(coarse_field).copy(), f)
     repeated = np.repeat(np.repeat(coarse_field, f, axis=0), f, axis=1)
     # judged over all ranks, so that every rank fails together
     assert max_abs(coarse, means - coarse.local_part(expected)) <= 1e-14
