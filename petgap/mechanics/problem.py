@@ -35,6 +35,7 @@ from mpi4py import MPI
 
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.interactions import HardWall
+from petgap.parallel.grid import row_blocks
 from petgap.surfaces.statistics import (check_local_field, finite_difference_slopes,
                                         statistics)
 
@@ -294,7 +295,7 @@ class ContactProblem:
             ``max violation in gap / h0`` -- gap in contact, penetration off it.
         """
         rp = rg = 0.0
-        for rows in _blocks(gap.shape[0]):
+        for rows in row_blocks(gap.shape[0]):
             g, p, c = gap[rows], pressure[rows], contact[rows]
             stress = p + self.interaction.derivative(g) if self.interaction.adhesive else p
             free = ~c
@@ -321,7 +322,7 @@ class ContactProblem:
         interaction = self.interaction
         # Sums over the slab in row blocks: no full-size temporaries at the peak.
         local = np.zeros(8)
-        for rows in _blocks(gap.shape[0]):
+        for rows in row_blocks(gap.shape[0]):
             g, p, c = gap[rows], pressure[rows], contact[rows]
             repulsive = c & (p > 0)
             # sums in double whatever the fields' precision
@@ -368,12 +369,6 @@ class ContactProblem:
             operator_applications=int(operator_applications), wall_time=float(wall_time),
             history=list(history), start=str(start), start_time=float(start_time),
             precision=getattr(grid, "precision", "double"))
-
-
-def _blocks(nrows, points=1 << 16, ncols=None):
-    """Row slices of about ``points`` values, to bound temporaries in reductions."""
-    step = max(1, points // max(ncols or 1024, 1))
-    return [slice(i, min(i + step, nrows)) for i in range(0, nrows, step)]
 
 
 def _max_or_zero(values):

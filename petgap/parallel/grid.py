@@ -47,6 +47,13 @@ def weighted_power(c, qx, qy, wrow, power):
     return binding.weighted_power(c, qx, qy, wrow, power)
 
 
+def row_blocks(nrows, points=1 << 16, ncols=None):
+    """Row slices of a slab of about ``points`` values each (rows of ``ncols``, 1024 if
+    None), to bound the temporaries of a pass over it."""
+    step = max(1, points // max(ncols or 1024, 1))
+    return [slice(i, min(i + step, nrows)) for i in range(0, nrows, step)]
+
+
 class DecompositionError(ValueError):
     """The grid cannot be split into non-empty slabs on this communicator."""
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
-from petgap.parallel.grid import weighted_power
+from petgap.parallel.grid import row_blocks, weighted_power
 
 
 @dataclass(frozen=True)
@@ -184,7 +184,8 @@ def finite_difference_slopes(grid, h_local):
     if rows:
         # in blocks of rows: no slab-sized temporaries (a run's peak memory is set
         # here otherwise, before the solve)
-        for i0, i1 in _row_blocks(rows, ny):
+        for b in row_blocks(rows, ncols=ny):
+            i0, i1 = b.start, b.stop
             block = h_local[i0:min(i1 + 1, rows)]      # with the next row, if this rank has it
             sums[0] += np.sum(np.diff(block, axis=0) ** 2)
             sums[2] += np.sum(np.diff(block[:i1 - i0], axis=1) ** 2)
@@ -212,12 +213,6 @@ def low_pass(grid, h_local, q_cutoff):
     c = grid.forward(h_local)
     c[grid.q_magnitude() > q_cutoff] = 0.0
     return grid.backward() / grid.npoints
-
-
-def _row_blocks(rows, ny, points=1 << 16):
-    """``(start, stop)`` of consecutive blocks of about ``points`` values of a slab."""
-    step = max(1, points // max(ny, 1))
-    return [(i, min(i + step, rows)) for i in range(0, rows, step)]
 
 
 def finite_difference_curvature(grid, h_local):
@@ -249,8 +244,8 @@ def finite_difference_curvature(grid, h_local):
     first = 1 if start == 0 else 0                    # global rows 1 .. nx - 2 only
     last = rows - 1 if start + rows == nx else rows
     # in blocks of rows, each with its neighbours: no slab-sized temporaries
-    for i0, i1 in _row_blocks(rows, ny):
-        i0, i1 = max(i0, first), min(i1, last)
+    for b in row_blocks(rows, ncols=ny):
+        i0, i1 = max(b.start, first), min(b.stop, last)
         if i0 >= i1:
             continue
         top = h_local[i0 - 1:i0] if i0 > 0 else above[None, :]
