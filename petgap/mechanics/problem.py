@@ -188,7 +188,7 @@ class ContactProblem:
         self.half_space = half_space
         self.interaction = interaction or HardWall()
         # in the grid's precision (single-precision grids: 32-bit fields, double sums)
-        self.topography = np.ascontiguousarray(topography, dtype=getattr(grid, "dtype", float))
+        self.topography = np.ascontiguousarray(topography, dtype=grid.dtype)
         # The spectral statistics (the surface's own, as reported for it) set the
         # unit-free residual scales.
         stats = statistics(grid, self.topography)
@@ -368,7 +368,7 @@ class ContactProblem:
             solver=solver, iterations=int(iterations),
             operator_applications=int(operator_applications), wall_time=float(wall_time),
             history=list(history), start=str(start), start_time=float(start_time),
-            precision=getattr(grid, "precision", "double"))
+            precision=grid.precision)
 
 
 def _max_or_zero(values):

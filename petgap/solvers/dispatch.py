@@ -109,7 +109,7 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
         raise ValueError(f"-tao_type {tao_type} is not supported; use one of {', '.join(SOLVER_TYPES)}")
     adhesive = problem.interaction.adhesive
     periodic = problem.half_space.periodic
-    grid_precision = getattr(problem.grid, "precision", "double")
+    grid_precision = problem.grid.precision
     precision = grid_precision if precision is None else precision
     if precision not in PRECISIONS:
         raise ValueError(f"precision {precision!r} is not one of {', '.join(PRECISIONS)}")
@@ -126,14 +126,6 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
                              f"{'periodic' if periodic else 'free boundary'}, {tao_type}, "
                              f"{type(control).__name__}); use double precision")
         tao_type = "pcg-pressure"
-    if precision == "mixed":
-        if isinstance(control, Load) and control.mean_pressure == 0:
-            return touching_state(problem, control)
-        with petsc_options(options):
-            coarse = PETSc.Options().getBool("petgap_coarse_start", True)
-        return solve_mixed(problem, control, tolerance=tolerance, max_iterations=max_iterations,
-                           monitor=monitor, coarse_start=coarse,
-                           initial_pressure=None if initial is None else initial.pressure)
     if not periodic and (adhesive or tao_type not in ("pcg", "pcg-pressure")):
         if isinstance(control, Indentation):
             raise ValueError("indentation control is for the hard wall with pcg or "
@@ -163,8 +155,16 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
             full.operator_applications = problem.operator_applications - before
             return full
         checked = problem.operator_applications - before   # the first step of a problem
-    solution = _solve(problem, control, tao_type, adhesive, tolerance, max_iterations, initial,
-                      options, monitor)
+    if precision == "mixed":
+        with petsc_options(options):
+            coarse = PETSc.Options().getBool("petgap_coarse_start", True)
+        solution = solve_mixed(problem, control, tolerance=tolerance,
+                               max_iterations=max_iterations, monitor=monitor,
+                               coarse_start=coarse,
+                               initial_pressure=None if initial is None else initial.pressure)
+    else:
+        solution = _solve(problem, control, tao_type, adhesive, tolerance, max_iterations,
+                          initial, options, monitor)
     solution.operator_applications += checked
     return solution
 
