@@ -65,7 +65,7 @@ from petgap import analysis
 from petgap.app.argtypes import number_in, positive_float
 from petgap.app.build import build, load_scene, make_grid, make_surface
 from petgap.app.study_report import StudyError, check_outputs, format_table, write_outputs
-from petgap.io.scene import SINGLE_TOLERANCE_FLOOR
+from petgap.io.scene import SINGLE_TOLERANCE_FLOOR, precision_refusal
 from petgap.parallel.collective import root_decides
 from petgap.parallel.grid import DecompositionError
 from petgap.parallel.log import get_logger
@@ -194,14 +194,9 @@ def precision_ladder(scene):
     solvers other than the pressure solver).
     """
     g, solver = scene.grid, scene.solver
-    why = None
-    if scene.interaction.kind != "hard-wall" or scene.control.reference == "non-adhesive":
-        why = "single and mixed precision are for non-adhesive contact"
-    elif not scene.surface.periodic:
-        why = "single and mixed precision are for a periodic cell (surface.periodic = true)"
-    elif solver.tao_type not in ("pcg", "pcg-pressure"):
-        why = (f"single and mixed precision run the pressure solver, and tao_type = "
-               f"{json.dumps(solver.tao_type)}")
+    # (the paper's protocol has an adhesive interaction: refused with it)
+    refusal = precision_refusal(scene.interaction.kind, solver.tao_type, scene.surface.periodic)
+    why = None if refusal is None else f"solver.precision single or mixed {refusal[0]}"
     rungs = []
     for i, precision in enumerate(PRECISIONS):
         tolerance = solver.tolerance

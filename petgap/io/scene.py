@@ -722,6 +722,24 @@ class ControlSection:
 SINGLE_TOLERANCE_FLOOR = 1e-6
 
 
+def precision_refusal(interaction_kind, tao_type, periodic):
+    """Why ``solver.precision`` single or mixed cannot solve such a scene, or None.
+
+    ``(why, allowed)`` for the first of: an adhesive interaction, a solver other
+    than the pressure solver, a free boundary (None for a section not known).
+    The one rule for the scene check and for the study's precision ladder.
+    """
+    if interaction_kind is not None and interaction_kind != "hard-wall":
+        return (f"is for the non-adhesive pressure solver, and interaction.kind = "
+                f"{json.dumps(interaction_kind)}", '"double" with adhesion')
+    if tao_type not in ("pcg", "pcg-pressure"):
+        return (f"is for the pressure solver, and tao_type = {json.dumps(tao_type)}",
+                '"double", or tao_type = "pcg" or "pcg-pressure"')
+    if periodic is not None and not periodic:
+        return "is for a periodic cell, and surface.periodic = false", '"double" on a free boundary'
+    return None
+
+
 @dataclass(frozen=True)
 class SolverSection:
     """The minimiser and its stopping rule.
@@ -762,17 +780,11 @@ class SolverSection:
         if precision == "double":
             return
         interaction, surface = ctx.get("interaction"), ctx.get("surface")
-        if interaction is not None and interaction.kind != "hard-wall":
-            problems.append(("precision", precision, "is for the non-adhesive pressure solver, "
-                             f"and interaction.kind = {json.dumps(interaction.kind)}",
-                             '"double" with adhesion'))
-        elif values["tao_type"] not in ("pcg", "pcg-pressure"):
-            problems.append(("precision", precision, f"is for the pressure solver, and "
-                             f"tao_type = {json.dumps(values['tao_type'])}",
-                             '"double", or tao_type = "pcg" or "pcg-pressure"'))
-        elif surface is not None and not surface.periodic:
-            problems.append(("precision", precision, "is for a periodic cell, and "
-                             "surface.periodic = false", '"double" on a free boundary'))
+        refusal = precision_refusal(None if interaction is None else interaction.kind,
+                                    values["tao_type"], None if surface is None
+                                    else surface.periodic)
+        if refusal is not None:
+            problems.append(("precision", precision) + refusal)
         elif precision == "single" and values["tolerance"] < SINGLE_TOLERANCE_FLOOR:
             problems.append(("tolerance", values["tolerance"],
                              "is below what single precision resolves (the gap is a "
