@@ -54,7 +54,8 @@ def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monit
     Whatever the single solve ends with (converged or not) is only a start: the
     double solve's verdict is the result's.  The result's iterations, operator
     applications and history are the sums over both solves (the coarse start's
-    not counted, as in every pressure solve); ``start`` says how each went, and ``precision`` is ``"mixed"``.  Collective.
+    not counted, as in every pressure solve); ``start`` says how each went, and
+    ``precision`` is ``"mixed"``.  Collective.
     """
     if not isinstance(control, (Load, MeanGap)):
         raise TypeError(f"mixed precision solves load or mean-gap control, not {control!r}")
