@@ -36,13 +36,6 @@ def main():
     petgap_rule = pressure_cg.RESTART_FRACTION
     rules = [("Polonsky-Keer", 0.0), (f"petgap ({petgap_rule:g})", petgap_rule),
              ("never", float("inf"))]
-
-    def factor_of(f):
-        def factor(shape):
-            nx, ny = shape
-            ok = nx % f == 0 and ny % f == 0 and min(nx, ny) // f >= coarse.MIN_SIDE
-            return f if ok else None
-        return factor
     comm = None
     lines = []
     for n in args.sizes:
@@ -53,7 +46,7 @@ def main():
                                    rms_slope=0.1, seed=seed)
             problem = petgap.ContactProblem(grid, h, petgap.ElasticHalfSpace(grid, 1.0))
             for f in args.factor:
-                coarse.coarsening_factor = factor_of(f)
+                coarse.FACTOR = f
                 cells = []
                 for _, fraction in rules:
                     pressure_cg.RESTART_FRACTION = fraction

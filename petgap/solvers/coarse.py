@@ -47,6 +47,8 @@ from petgap.parallel.grid import DecompositionError, Grid
 
 #: Smallest side of a coarse grid, in points (below it the uniform start is cheap).
 MIN_SIDE = 32
+#: Block size of a coarsening level (see the module docstring for why 2).
+FACTOR = 2
 #: Coarse solves stop here (or at the fine tolerance if that is looser): a
 #: start needs no more; the fine solve's iterations hardly depend on it between
 #: 1e-2 and 1e-6.
@@ -54,12 +56,12 @@ COARSE_TOLERANCE = 1e-4
 
 
 def coarsening_factor(shape):
-    """The block size ``f`` (2) for a grid of this shape, or None.
+    """The block size ``f`` (:data:`FACTOR`) for a grid of this shape, or None.
 
     Depends on the shape alone, so every rank count decides alike.
     """
     nx, ny = shape
-    f = 2
+    f = FACTOR
     if nx % f == 0 and ny % f == 0 and min(nx, ny) // f >= MIN_SIDE:
         return f
     return None
