@@ -65,7 +65,8 @@ and the same on every rank; every function that communicates is collective.
 
 Importing petgap loads its modules (and NumPy, mpi4py, petsc4py and the
 FFTW-MPI binding, which initialise MPI, PETSc and FFTW-MPI as they load) and
-does nothing else.  PETSc options for a solve go in ``solve(..., options={...})``;
+does one thing more: it lets the C library return freed fields to the system,
+which a library PETSc loads turns off (:mod:`petgap.parallel.memory`).  PETSc options for a solve go in ``solve(..., options={...})``;
 to hand PETSc a script's command line instead, call ``petsc4py.init(sys.argv)``
 before ``import petgap``.
 """
@@ -89,6 +90,9 @@ from petgap.solvers import solve, sweep  # noqa: E402
 from petgap.surfaces import load_topography, radial_psd, save_topography_npy  # noqa: E402
 from petgap.surfaces.statistics import statistics  # noqa: E402  (petgap.surfaces keeps the module)
 from petgap.surfaces.self_affine import self_affine  # noqa: E402  (the module's name)
+from petgap.parallel.memory import return_freed_memory  # noqa: E402
+
+return_freed_memory()
 
 __all__ = [
     "__version__",

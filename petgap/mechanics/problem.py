@@ -177,7 +177,9 @@ class ContactProblem:
     def __init__(self, grid, topography, half_space=None, interaction=None, *,
                  contact_modulus=None):
         # checked on every rank together: a slab of the wrong shape raises everywhere
-        topography = check_local_field(grid, topography, "topography")
+        # kept in its own floating type until made the grid's (no double copy of a
+        # single-precision topography)
+        topography = check_local_field(grid, topography, "topography", dtype=None)
         if half_space is None:
             half_space = ElasticHalfSpace(grid, 1.0 if contact_modulus is None
                                           else contact_modulus)

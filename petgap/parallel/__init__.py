@@ -18,6 +18,9 @@ Modules
     :func:`global_sums`: any number of sums in one reduction.
 :mod:`.dottest`
     :func:`dottest`: ``<A x, y> = <x, A^T y>`` for a distributed operator.
+:mod:`.memory`
+    :func:`return_freed_memory`: freed fields go back to the system (PETSc's
+    SuperLU_DIST turns that off as it loads).
 :mod:`.log`
     Rank-aware progress messages, the handling of failures on some ranks, and
     the PETSc log events of petgap's operator and kernels.

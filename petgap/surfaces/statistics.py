@@ -68,11 +68,11 @@ def statistics(grid, h_local):
     SurfaceStatistics
         The same on every rank (one allreduce of four numbers).
     """
-    h_local = check_local_field(grid, h_local, "h_local")
+    h_local = check_local_field(grid, h_local, "h_local", dtype=None)   # no copy
     c = grid.forward(h_local)
     if grid.ky_slice.start == 0:
         c[0, 0] = 0.0  # the mean, removed exactly instead of by subtraction
-    sums = np.array([np.sum(h_local)] + [weighted_power(c, grid.qx, grid.qy,
+    sums = np.array([np.sum(h_local, dtype=np.float64)] + [weighted_power(c, grid.qx, grid.qy,
                                                         grid.hermitian_weight, p)
                                          for p in (0, 2, 4)])
     grid.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
@@ -140,9 +140,15 @@ def radial_psd(grid, h_local, nbins=None):
     return total[1, full] / count, grid.area * total[2, full] / (count * grid.npoints ** 2)
 
 
-def check_local_field(grid, h_local, name):
-    """``h_local`` as a float64 array of this rank's slab shape; ValueError on every rank if not."""
-    h_local = np.asarray(h_local, dtype=np.float64)
+def check_local_field(grid, h_local, name, dtype=np.float64):
+    """``h_local`` as an array of this rank's slab shape; ValueError on every rank if not.
+
+    Of ``dtype``; with ``dtype=None`` a floating-point array keeps its own (a
+    single-precision topography is not copied to double) and any other becomes float64.
+    """
+    h_local = np.asarray(h_local, dtype=dtype)
+    if not np.issubdtype(h_local.dtype, np.floating):
+        h_local = h_local.astype(np.float64)
     bad = grid.comm.allgather(None if h_local.shape == grid.local_shape
                               else (h_local.shape, grid.local_shape))
     for rank, problem in enumerate(bad):

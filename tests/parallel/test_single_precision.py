@@ -115,3 +115,20 @@ def test_buffers_are_half_and_bad_precision_refused(comm):
     assert single.wisdom_path().name.endswith("-single.txt")
     with pytest.raises(ValueError, match="precision = 'half' is not allowed"):
         Grid((64, 48), comm=comm, precision="half")
+
+
+def test_a_single_topography_is_not_copied_to_double(comm):
+    # a problem on a single grid keeps the caller's float32 slab, so a single-precision
+    # run holds its topography once, in 4 bytes per point
+    from petgap.mechanics.problem import ContactProblem
+    from petgap.surfaces.statistics import statistics
+    double, single = grids(comm, (64, 48))
+    glob = np.random.default_rng(3).standard_normal((64, 48))
+    h32 = single.local_part(glob).astype(np.float32)
+    problem = ContactProblem(single, h32, ElasticHalfSpace(single, 1.0))
+    assert problem.topography is h32
+    s32, s64 = statistics(single, h32), statistics(double, double.local_part(glob))
+    # the mean and the spectral sums are accumulated in double
+    assert s32.mean == pytest.approx(s64.mean, abs=1e-7)
+    assert s32.rms_height == pytest.approx(s64.rms_height, rel=1e-6)
+    assert s32.rms_slope == pytest.approx(s64.rms_slope, rel=1e-6)
