@@ -23,7 +23,7 @@ reductions.  The model:
   from a measured one-rank solve's time per iteration beside its floor).
 * **Iterations** of the GUIDE surface grow like ``a + b log2(n)^2`` (fitted to the measured
   counts given with ``--iterations``, the defaults being docs/benchmarks.md's).
-* **Memory per rank**: ``91 MB + 50 B x N / P`` (docs/benchmarks.md, "Memory per point":
+* **Memory per rank**: ``91 MB + 40 B x N / P`` (docs/benchmarks.md, "Memory per point":
   a whole double run's peak).
 
 ``--check-slurm`` reads ``runs/slurm/petgap.sbatch`` (nodes, ranks per node, memory per CPU,
@@ -52,8 +52,8 @@ sys.path.insert(0, str(HERE))
 #: FFT pairs per iteration of pcg-pressure (docs/benchmarks.md: 2.77-2.97).
 PAIRS_PER_ITERATION = 2.9
 #: Bytes per point and fixed bytes per rank of a whole non-adhesive run (docs/benchmarks.md,
-#: "Memory per point": 46-49 measured at 4096^2-16384^2 on one rank).
-BYTES_PER_POINT, FIXED_BYTES = 50.0, 91e6
+#: "Memory per point": 36.5-38.4 measured at 4096^2-16384^2 on one rank, rounded up).
+BYTES_PER_POINT, FIXED_BYTES = 40.0, 91e6
 #: Iterations of the GUIDE surface at 512^2-16384^2 (docs/benchmarks.md, coarse start).
 ITERATIONS = {512: 16, 1024: 19, 2048: 22, 4096: 28, 16384: 39}
 

@@ -166,11 +166,12 @@ def check_options(scene, petsc_args=(), strict=False, log=None):
 #: (docs/benchmarks.md, "Memory per point"): the pressure solver (hard wall, periodic,
 #: pcg or pcg-pressure) in double or mixed precision, and in single; every other solve
 #: (adhesion, the solvers on the gap); a surface-only run (the FFT buffers and the
-#: topography).  Each is a measured whole run's peak with a margin for small grids,
-#: whose fixed costs weigh more.
-BYTES_PER_POINT_PRESSURE = 64
-BYTES_PER_POINT_PRESSURE_SINGLE = 48
-BYTES_PER_POINT_SOLVE = 90
+#: topography).  Each is a measured whole run's peak (38, 27.5 and 68 bytes per point
+#: at 4096^2) with a margin for small grids, whose fixed costs weigh more, and for
+#: TAO's solvers (32 bytes per point more than the pressure solver).
+BYTES_PER_POINT_PRESSURE = 48
+BYTES_PER_POINT_PRESSURE_SINGLE = 36
+BYTES_PER_POINT_SOLVE = 80
 BYTES_PER_POINT_SURFACE = 40
 #: The same for a free boundary: the hard wall adds the padded cell's FFT buffers and
 #: kernel (181-191 measured, docs/benchmarks.md, "Free boundary beside periodic");

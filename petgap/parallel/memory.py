@@ -17,6 +17,7 @@ nothing in petgap uses SuperLU_DIST.  On a C library without ``mallopt``
 """
 import ctypes
 import ctypes.util
+import importlib
 
 # glibc's <malloc.h> parameter numbers
 _M_TRIM_THRESHOLD = -1
@@ -42,7 +43,7 @@ def return_freed_memory():
     """
     # deferred to the call (importing petsc4py initialises PETSc): loaded here for its
     # libraries' constructors
-    from petsc4py import PETSc  # noqa: F401
+    importlib.import_module("petsc4py.PETSc")
     name = ctypes.util.find_library("c")
     try:
         mallopt = ctypes.CDLL(name).mallopt
