@@ -66,9 +66,9 @@ and the same on every rank; every function that communicates is collective.
 Importing petgap loads its modules (and NumPy, mpi4py, petsc4py and the
 FFTW-MPI binding, which initialise MPI, PETSc and FFTW-MPI as they load) and
 does one thing more: it lets the C library return freed fields to the system,
-which a library PETSc loads turns off (:mod:`petgap.parallel.memory`).  PETSc options for a solve go in ``solve(..., options={...})``;
-to hand PETSc a script's command line instead, call ``petsc4py.init(sys.argv)``
-before ``import petgap``.
+which a library PETSc loads turns off (:mod:`petgap.parallel.memory`).  PETSc
+options for a solve go in ``solve(..., options={...})``; to hand PETSc a script's
+command line instead, call ``petsc4py.init(sys.argv)`` before ``import petgap``.
 """
 from petgap._version import __version__  # noqa: E402
 

@@ -16,7 +16,6 @@ nothing in petgap uses SuperLU_DIST.  On a C library without ``mallopt``
 (not glibc) it does nothing.
 """
 import ctypes
-import ctypes.util
 import importlib
 
 # glibc's <malloc.h> parameter numbers
@@ -34,6 +33,20 @@ TRIM_THRESHOLD = 2 * MMAP_THRESHOLD
 MMAP_MAX = 65536
 
 
+def mallopt():
+    """glibc's ``mallopt(parameter, value)`` (1 on success), or None without one.
+
+    Looked up among the symbols the process has already loaded: no library search.
+    """
+    try:
+        function = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return None
+    function.argtypes = [ctypes.c_int, ctypes.c_int]
+    function.restype = ctypes.c_int
+    return function
+
+
 def return_freed_memory():
     """Let glibc map large blocks and trim its heap again; True if it could.
 
@@ -44,13 +57,9 @@ def return_freed_memory():
     # deferred to the call (importing petsc4py initialises PETSc): loaded here for its
     # libraries' constructors
     importlib.import_module("petsc4py.PETSc")
-    name = ctypes.util.find_library("c")
-    try:
-        mallopt = ctypes.CDLL(name).mallopt
-    except (OSError, AttributeError, TypeError):
+    set_option = mallopt()
+    if set_option is None:
         return False
-    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
-    mallopt.restype = ctypes.c_int
     settings = ((_M_MMAP_MAX, MMAP_MAX), (_M_MMAP_THRESHOLD, MMAP_THRESHOLD),
                 (_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
-    return all([mallopt(parameter, value) == 1 for parameter, value in settings])
+    return all([set_option(parameter, value) == 1 for parameter, value in settings])

@@ -72,9 +72,8 @@ def statistics(grid, h_local):
     c = grid.forward(h_local)
     if grid.ky_slice.start == 0:
         c[0, 0] = 0.0  # the mean, removed exactly instead of by subtraction
-    sums = np.array([np.sum(h_local, dtype=np.float64)] + [weighted_power(c, grid.qx, grid.qy,
-                                                        grid.hermitian_weight, p)
-                                         for p in (0, 2, 4)])
+    powers = [weighted_power(c, grid.qx, grid.qy, grid.hermitian_weight, p) for p in (0, 2, 4)]
+    sums = np.array([np.sum(h_local, dtype=np.float64)] + powers)
     grid.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
     n = grid.npoints
     return SurfaceStatistics(mean=float(sums[0] / n), rms_height=float(np.sqrt(sums[1]) / n),

@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from petgap.parallel.memory import return_freed_memory
+from petgap.parallel.memory import mallopt, return_freed_memory
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
                                 reason="reads /proc/self/status and glibc's mallopt")
@@ -43,11 +43,8 @@ def test_a_freed_field_leaves_the_resident_set():
 
 def test_the_settings_are_what_petgap_import_restores():
     # undo them as SuperLU_DIST does, see the field stay, restore, see it go
-    import ctypes
-    import ctypes.util
-    mallopt = ctypes.CDLL(ctypes.util.find_library("c")).mallopt
-    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
-    assert mallopt(-4, 0) == 1 and mallopt(-1, -1) == 1   # M_MMAP_MAX, M_TRIM_THRESHOLD
+    set_option = mallopt()
+    assert set_option(-4, 0) == 1 and set_option(-1, -1) == 1   # M_MMAP_MAX, M_TRIM_THRESHOLD
     try:
         stays = released_after_free()
     finally:
