@@ -82,6 +82,12 @@ kernels' accumulators), so that what single precision costs is the rounding of
 the fields, not of the reductions.  The gap ``u - h + d`` is then a difference
 of 7-digit numbers: the KKT residual cannot fall much below ``1e-7 max|h| /
 h0``, and :mod:`petgap.solvers.mixed_precision` refines such a solve in double.
+Near that floor the rounding of ``u`` moves edge points in and out of S at
+every iteration and the residual wanders instead of falling, so a
+single-precision solve whose residual has not fallen below
+:data:`STALL_FACTOR` of its best for :data:`STALL_ITERATIONS` iterations stops,
+unconverged, with the reason ``"stalled_round_off"`` rather than run on to
+its iteration limit.
 
 Convergence is judged at the start of an iteration, on the pair ``(p, g)`` the
 iteration starts from, by the gap residual of
@@ -103,6 +109,12 @@ from petgap.solvers.convergence import Timer, judge
 #: fraction of the contact set enter it in one iteration; see "Restarts" in the
 #: module docstring.  0 is Polonsky and Keer's own rule.
 RESTART_FRACTION = 0.003
+#: A single-precision solve stops as ``"stalled_round_off"`` when its residual
+#: has not fallen below ``STALL_FACTOR`` times its best for ``STALL_ITERATIONS``
+#: iterations (see "Precision" in the module docstring).  Far from the floor
+#: the residual falls by about half per iteration, so the rule never fires there.
+STALL_ITERATIONS = 20
+STALL_FACTOR = 0.9
 
 
 def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
@@ -230,6 +242,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     history = []
     converged, reason, it = False, "max_iterations", 0
     first = 0
+    watch_stall = dtype == np.float32
+    best, best_it = np.inf, 0
     if contact is None and not periodic:
         contact = ContactSet.everywhere(mask, padded_width, target, dtype=dtype)  # C P0 is not zero
     if contact is None:
@@ -284,6 +298,12 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         if verdict:
             converged, reason = verdict == "converged_kkt", verdict
             break
+        if watch_stall:
+            if residual < STALL_FACTOR * best:
+                best, best_it = residual, it
+            elif it - best_it >= STALL_ITERATIONS:
+                reason = "stalled_round_off"
+                break
         if n_contact == 0 or (load and n_contact == 1):
             # Mean-gap control with no contact yet, or load control on a single
             # contact point (e.g. warm-started from a one-pixel contact), where no

@@ -210,6 +210,22 @@ def test_cross_checks(comm):
     assert "control.values = [1.0, 0]" in msg and "item 1 (0)" in msg
 
 
+def test_single_precision_tolerance_floor(comm):
+    """A single solve asked below what 32 bits resolve is refused, naming the floor and
+    the way out; at the floor it is accepted."""
+    from petgap.io.scene import SINGLE_TOLERANCE_FLOOR
+    below = SINGLE_TOLERANCE_FLOOR / 2
+    msg = error_of(comm, MINIMAL + f'[solver]\nprecision = "single"\ntolerance = {below!r}\n')
+    assert f"solver.tolerance = {below!r}" in msg, msg
+    assert f">= {SINGLE_TOLERANCE_FLOOR:g}" in msg and '"mixed"' in msg
+    scene = parse(comm, MINIMAL + f'[solver]\nprecision = "single"\n'
+                  f'tolerance = {SINGLE_TOLERANCE_FLOOR!r}\n')
+    assert scene.solver.tolerance == SINGLE_TOLERANCE_FLOOR
+    # mixed refines in double: any tolerance
+    assert parse(comm, MINIMAL + '[solver]\nprecision = "mixed"\ntolerance = 1e-10\n'
+                 ).solver.precision == "mixed"
+
+
 def test_adhesive_load_may_be_tensile(comm):
     scene = parse(comm, MINIMAL + '[interaction]\nkind = "exponential"\nwork_of_adhesion = 1e-3\n'
                   'range = "2 a0"\n[control]\nkind = "load"\nvalues = [-1e-4, 0, 1e-3]\n'

@@ -18,6 +18,7 @@ from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers.dispatch import solve
 from petgap.solvers.mixed_precision import single_precision_twin
+from petgap.solvers.pressure_cg import STALL_FACTOR, STALL_ITERATIONS, polonsky_keer
 from petgap.surfaces.self_affine import self_affine
 
 SHAPE = (256, 256)
@@ -85,6 +86,24 @@ def test_single_precision_does_not_depend_on_the_ranks(comm):
     dp = grid.comm.allreduce(float(np.abs(b.pressure - a.pressure[grid.x_slice]).max()),
                              op=MPI.MAX)
     assert dp <= 1e-4 * many.pressure_scale
+
+
+def test_a_single_solve_below_its_round_off_stops_as_stalled(comm):
+    """Asked for what 32 bits cannot resolve, a single solve stops and says so.
+
+    Without the stall rule it would chatter at its round-off floor up to the
+    iteration limit; the double solve of the same tolerance converges.
+    """
+    single = rough(comm, "single")
+    sol = polonsky_keer(single, Load(0.004), tolerance=1e-10, max_iterations=2000)
+    assert not sol.converged and sol.reason == "stalled_round_off"
+    assert STALL_ITERATIONS < sol.iterations < 200
+    assert 1e-10 < sol.kkt_gap < 1e-5        # near its floor, not lost
+    assert len(sol.history) > STALL_ITERATIONS
+    best = min(sol.history)
+    assert min(sol.history[-STALL_ITERATIONS:]) >= STALL_FACTOR * best
+    double = polonsky_keer(rough(comm), Load(0.004), tolerance=1e-10, max_iterations=2000)
+    assert double.converged and double.kkt_gap <= 1e-10
 
 
 def test_single_precision_twin_is_the_same_problem(comm):
