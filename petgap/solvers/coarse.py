@@ -19,6 +19,11 @@ The coarse problem is made for the start and dropped after it (the later
 steps of a sweep start warm), so that it never adds to the fine solve's peak
 memory; its transforms are planned with FFTW's "estimate", so that a first
 run of a size does not spend longer planning the levels than solving on them.
+On a periodic cell the coarse levels are single precision whatever the
+fine grid's: a start is solved to :data:`COARSE_TOLERANCE`, far above what
+32 bits resolve (:data:`petgap.io.scene.SINGLE_TOLERANCE_FLOOR`), and in
+single its transforms move half the bytes.  The fine solve takes the
+prolonged pressure in its own precision.
 
 This module holds the coarse problem and the transfers between the grids
 only; it does not solve, so the solver may import it without a cycle.
@@ -77,15 +82,18 @@ def coarse_problem(problem):
     f = coarsening_factor(grid.shape)
     if f is None:
         return None
+    # single precision on a periodic cell (the free half-space is double only)
+    precision = "single" if problem.half_space.periodic else grid.precision
     try:
         cgrid = Grid((grid.nx // f, grid.ny // f), size=(grid.Lx, grid.Ly), comm=grid.comm,
-                     planner="estimate", wisdom=grid.wisdom)
+                     planner="estimate", wisdom=grid.wisdom, precision=precision)
     except DecompositionError:
         return None  # too few coarse rows for this many ranks: no coarse start
     # where the set-up time goes, level by level
-    get_logger("coarse").info("coarse grid %dx%d for the start: FFTs planned in %.2f s (%s)",
-                              cgrid.nx, cgrid.ny, cgrid.planning_time, cgrid.planner)
-    h = restrict(grid, cgrid, problem.topography, f)
+    get_logger("coarse").info("coarse grid %dx%d (%s) for the start: FFTs planned in %.2f s "
+                              "(%s)", cgrid.nx, cgrid.ny, precision, cgrid.planning_time,
+                              cgrid.planner)
+    h = restrict(grid, cgrid, problem.topography, f).astype(cgrid.dtype, copy=False)
     return ContactProblem(cgrid, h, problem.half_space.on_grid(cgrid),
                           problem.interaction)
 

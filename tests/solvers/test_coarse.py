@@ -76,6 +76,21 @@ def test_coarse_start_reaches_the_uniform_start_state_sooner(comm, control):
     assert_same_state(grid, coarse, plain, *tolerance_scales(problem, tol))
     assert coarse_problem(problem).grid.shape == (128, 128)
     assert coarse_problem(problem) is not coarse_problem(problem)  # not kept: no memory held
+    # a start in single precision, the answer in the problem's own
+    assert coarse_problem(problem).grid.precision == "single"
+    assert coarse_problem(problem).topography.dtype == np.float32
+    assert coarse.pressure.dtype == coarse.gap.dtype == np.float64
+
+
+def test_coarse_levels_of_a_free_boundary_stay_double(comm):
+    """The free half-space is double only: its coarse levels are too."""
+    from petgap.mechanics.free_half_space import FreeHalfSpace
+    grid = make_grid((128, 128), comm)
+    h = self_affine(grid, 0.8, 8 * grid.dx, 0.5 * grid.Lx, rms_slope=0.1, seed=2)
+    problem = ContactProblem(grid, h, FreeHalfSpace(grid, E_STAR))
+    coarse = coarse_problem(problem)
+    assert coarse.grid.shape == (64, 64) and coarse.grid.precision == "double"
+    assert not coarse.half_space.periodic
 
 
 @pytest.mark.parametrize("control", ["load", "mean-gap"])
@@ -140,6 +155,6 @@ def test_coarse_planning_time_is_said_per_level(comm):
         logger.removeHandler(handler)
         logger.setLevel(level)
     planned = [m for m in seen if "FFTs planned in" in m]
-    levels = [f"coarse grid {n}x{n} for the start" for n in (128, 64, 32)]
+    levels = [f"coarse grid {n}x{n} (single) for the start" for n in (128, 64, 32)]
     assert [m.split(":")[0] for m in planned] == levels * 2
     assert all(m.endswith("(estimate)") for m in planned)
