@@ -38,12 +38,18 @@ Conventions
   the number of ranks, so that results do not depend on it beyond round-off.
   Blocks of rows may straddle two ranks' slabs: rows are moved between the
   two decompositions with one ``Alltoallv`` each way (:func:`petgap.parallel.collective.move_rows`).
+* Coarse grids of at most :data:`WHOLE_POINTS` points are solved whole on
+  every rank (a grid on ``MPI.COMM_SELF``, the same arithmetic everywhere):
+  spread over ranks, their transforms and reductions would cost the
+  messages' latency and little else, and a slab decomposition stops at one
+  row per rank.  The finer levels stay distributed.
 * The coarse solve is a start, not a result: its tolerance is
   ``max(tolerance, COARSE_TOLERANCE)`` and a coarse solve that did not
   converge still gives its pressure (a NaN gives none: the caller then starts
   from the uniform pressure).
 """
 import numpy as np
+from mpi4py import MPI
 
 from petgap.mechanics.problem import ContactProblem
 from petgap.parallel.collective import move_rows
@@ -58,6 +64,8 @@ FACTOR = 2
 #: start needs no more; the fine solve's iterations hardly depend on it between
 #: 1e-2 and 1e-6.
 COARSE_TOLERANCE = 1e-4
+#: Coarse grids of at most this many points are solved whole on every rank.
+WHOLE_POINTS = 256 * 256
 
 
 def coarsening_factor(shape):
@@ -84,22 +92,34 @@ def coarse_problem(problem):
         return None
     # single precision on a periodic cell (the free half-space is double only)
     precision = "single" if problem.half_space.periodic else grid.precision
+    shape = (grid.nx // f, grid.ny // f)
+    whole = grid.comm.size > 1 and shape[0] * shape[1] <= WHOLE_POINTS
     try:
-        cgrid = Grid((grid.nx // f, grid.ny // f), size=(grid.Lx, grid.Ly), comm=grid.comm,
+        cgrid = Grid(shape, size=(grid.Lx, grid.Ly), comm=MPI.COMM_SELF if whole else grid.comm,
                      planner="estimate", wisdom=grid.wisdom, precision=precision)
     except DecompositionError:
         return None  # too few coarse rows for this many ranks: no coarse start
     # where the set-up time goes, level by level
-    get_logger("coarse").info("coarse grid %dx%d (%s) for the start: FFTs planned in %.2f s "
-                              "(%s)", cgrid.nx, cgrid.ny, precision, cgrid.planning_time,
+    get_logger("coarse").info("coarse grid %dx%d (%s%s) for the start: FFTs planned in %.2f s "
+                              "(%s)", cgrid.nx, cgrid.ny, precision,
+                              ", whole on every rank from here down" if whole else "",
+                              cgrid.planning_time,
                               cgrid.planner)
     h = restrict(grid, cgrid, problem.topography, f).astype(cgrid.dtype, copy=False)
     return ContactProblem(cgrid, h, problem.half_space.on_grid(cgrid),
                           problem.interaction)
 
 
+def is_whole(grid, coarse):
+    """Whether ``coarse`` is solved whole on every rank of the fine ``grid``'s ranks."""
+    return coarse.comm.size < grid.comm.size
+
+
 def restrict(grid, coarse, field, f):
-    """The block means of ``field`` (this rank's fine slab) on this rank's coarse slab."""
+    """The block means of ``field`` (this rank's fine slab) on this rank's coarse slab.
+
+    A ``coarse`` grid solved whole on every rank (:func:`is_whole`) gets every row.
+    """
     m = field.shape[0]
     x0 = grid.x_slice.start
     columns = field.reshape(m, grid.ny // f, f).sum(axis=2)
@@ -114,20 +134,25 @@ def restrict(grid, coarse, field, f):
     return out
 
 
-def prolong(first_row, grid, field, f):
+def prolong(first_row, grid, field, f, whole=False):
     """``field`` (this rank's coarse slab) repeated over each block, on this rank's fine slab.
 
     ``first_row`` is the global coarse row the slab starts at (the coarse grid's
     ``x_slice.start``): all that is needed of the coarse grid, which the caller
-    may then free before the fine field is made.  Written row by row into the
+    may then free before the fine field is made.  ``whole``: ``field`` is the
+    whole coarse field, the same on every rank (:func:`is_whole`), and each
+    rank takes its rows without messages.  Written row by row into the
     result: no fine-slab temporaries besides it.
     """
     m = grid.local_shape[0]
     x0 = grid.x_slice.start
     lo, hi = x0 // f, (x0 + m - 1) // f + 1
-    rows = np.empty((hi - lo, field.shape[1]), dtype=field.dtype)
-    for row, piece in move_rows(grid.comm, field, first_row, lo, hi):
-        rows[row - lo:row - lo + len(piece)] = piece
+    if whole:
+        rows = field[lo:hi]
+    else:
+        rows = np.empty((hi - lo, field.shape[1]), dtype=field.dtype)
+        for row, piece in move_rows(grid.comm, field, first_row, lo, hi):
+            rows[row - lo:row - lo + len(piece)] = piece
     out = np.empty(grid.local_shape, dtype=field.dtype)
     for i in range(m):
         out[i].reshape(-1, f)[...] = rows[(x0 + i) // f - lo][:, None]

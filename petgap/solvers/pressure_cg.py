@@ -471,9 +471,10 @@ def coarse_start_pressure(problem, control, tolerance, max_iterations):
         return None, description + " (NaN: not used)"
     factor = problem.grid.nx // cgrid.nx
     first_row = cgrid.x_slice.start
+    whole = coarse.is_whole(problem.grid, cgrid)
     # the coarse problem, grid and solution go before the fine field is made
     del solution, coarse_problem, cgrid
-    return coarse.prolong(first_row, problem.grid, pressure, factor), description
+    return coarse.prolong(first_row, problem.grid, pressure, factor, whole), description
 
 
 def full_contact_load(problem):

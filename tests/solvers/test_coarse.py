@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from petgap.solvers.coarse import coarse_problem, coarsening_factor, prolong, restrict
+from petgap.solvers import coarse as coarse_module
+from petgap.solvers.coarse import (coarse_problem, coarsening_factor, is_whole, prolong,
+                                   restrict)
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.parallel.grid import Grid
@@ -54,6 +56,35 @@ def test_restriction_and_prolongation_match_numpy(comm, shape, f):
     assert max_abs(grid, fine - grid.local_part(repeated)) == 0.0
 
 
+def test_whole_coarse_grid_on_every_rank_matches_numpy(comm):
+    """A coarse grid solved whole on every rank: each rank restricts to all of it and
+    prolongs from it to its own fine rows, whatever the fine decomposition."""
+    shape, f = (130, 64), 2
+    grid = make_grid(shape, comm, size=(2.0, 1.0))
+    whole = make_grid((65, 32), MPI.COMM_SELF, size=(2.0, 1.0))
+    assert is_whole(grid, whole) == (comm.size > 1)
+    rng = np.random.default_rng(11)
+    full = rng.standard_normal(shape)
+    means = restrict(grid, whole, grid.local_part(full).copy(), f)
+    expected = full.reshape(65, f, 32, f).mean(axis=(1, 3))
+    coarse_field = rng.standard_normal((65, 32))
+    fine = prolong(0, grid, coarse_field, f, whole=True)
+    repeated = np.repeat(np.repeat(coarse_field, f, axis=0), f, axis=1)
+    assert grid.comm.allreduce(float(np.abs(means - expected).max()), op=MPI.MAX) <= 1e-14
+    assert max_abs(grid, fine - grid.local_part(repeated)) == 0.0
+
+
+def test_small_coarse_grids_are_solved_whole_on_every_rank(comm, monkeypatch):
+    grid = make_grid((256, 256), comm)
+    problem = _rough(grid)
+    level = coarse_problem(problem)
+    assert level.grid.shape == (128, 128)
+    assert level.grid.comm.size == (1 if comm.size > 1 else comm.size)
+    assert level.grid.comm.allreduce(level.topography.size) == 128 * 128
+    monkeypatch.setattr(coarse_module, "WHOLE_POINTS", 0)
+    assert coarse_problem(problem).grid.comm.size == comm.size   # spread as the fine grid
+
+
 def _rough(grid, seed=2):
     h = self_affine(grid, 0.8, 8 * grid.dx, 0.5 * grid.Lx, rms_slope=0.1, seed=seed)
     return ContactProblem(grid, h, ElasticHalfSpace(grid, E_STAR))
@@ -93,9 +124,14 @@ def test_coarse_levels_of_a_free_boundary_stay_double(comm):
     assert not coarse.half_space.periodic
 
 
+@pytest.mark.parametrize("whole_points", [0, None])
 @pytest.mark.parametrize("control", ["load", "mean-gap"])
-def test_coarse_start_on_two_ranks_equals_one(comm, control):
-    """Straddling blocks (130 rows: fine 65 + 65, coarse 33 + 32) sum in another order only."""
+def test_coarse_start_on_two_ranks_equals_one(comm, control, whole_points, monkeypatch):
+    """Straddling blocks (130 rows: fine 65 + 65, coarse 33 + 32) sum in another order only;
+    with the coarse levels spread over the ranks (``whole_points = 0``) and solved whole
+    on every rank (the default for grids this small)."""
+    if whole_points is not None:
+        monkeypatch.setattr(coarse_module, "WHOLE_POINTS", whole_points)
     shape, size = (130, 64), (2.03125, 1.0)
     serial = make_grid(shape, MPI.COMM_SELF, size=size)
     h = self_affine(serial, 0.8, 8 * serial.dx, 0.5, rms_slope=0.1, seed=3)
@@ -155,6 +191,9 @@ def test_coarse_planning_time_is_said_per_level(comm):
         logger.removeHandler(handler)
         logger.setLevel(level)
     planned = [m for m in seen if "FFTs planned in" in m]
-    levels = [f"coarse grid {n}x{n} (single) for the start" for n in (128, 64, 32)]
+    # on several ranks the first level, 128^2, is small enough to be solved whole on each
+    first = "single, whole on every rank from here down" if comm.size > 1 else "single"
+    levels = [f"coarse grid {n}x{n} ({how}) for the start"
+              for n, how in ((128, first), (64, "single"), (32, "single"))]
     assert [m.split(":")[0] for m in planned] == levels * 2
     assert all(m.endswith("(estimate)") for m in planned)
