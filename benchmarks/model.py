@@ -52,11 +52,11 @@ sys.path.insert(0, str(HERE))
 #: FFT pairs per iteration of pcg-pressure (docs/benchmarks.md: 2.77-2.97).
 PAIRS_PER_ITERATION = 2.9
 #: Bytes per point and fixed bytes per rank of a whole non-adhesive run (docs/benchmarks.md,
-#: "Memory per point": 36.5-38.4 measured at 4096^2-16384^2 on one rank, rounded up).
+#: "Memory per point": 36.5-39.7 measured at 4096^2-16384^2 on one rank, rounded up).
 BYTES_PER_POINT, FIXED_BYTES = 40.0, 91e6
 #: Iterations of the GUIDE surface at 512^2-16384^2 (docs/benchmarks.md, "Non-adhesive rough
 #: contact" and "16384^2 on this machine").
-ITERATIONS = {512: 16, 1024: 19, 2048: 22, 4096: 28, 8192: 35, 16384: 43}
+ITERATIONS = {512: 16, 1024: 19, 2048: 22, 4096: 28, 8192: 35, 16384: 42}
 
 
 def solve_worker(n):

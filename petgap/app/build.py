@@ -166,7 +166,7 @@ def check_options(scene, petsc_args=(), strict=False, log=None):
 #: (docs/benchmarks.md, "Memory per point"): the pressure solver (hard wall, periodic,
 #: pcg or pcg-pressure) in double or mixed precision, and in single; every other solve
 #: (adhesion, the solvers on the gap); a surface-only run (the FFT buffers and the
-#: topography).  Each is a measured whole run's peak (38, 27.5 and 68 bytes per point
+#: topography).  Each is a measured whole run's peak (40, 24 and 68 bytes per point
 #: at 4096^2) with a margin for small grids, whose fixed costs weigh more, and for
 #: TAO's solvers (32 bytes per point more than the pressure solver).
 BYTES_PER_POINT_PRESSURE = 48
