@@ -36,6 +36,7 @@ to .npy, and solved
 Usage::
 
     python benchmarks/contact.py --sizes 512 1024 2048 --ranks 1 2 [--rounds 5] [--tamaas] [--no-coarse]
+        [--edge-correction THETA]
         [--protocol --work W] [--precision double single mixed]
 """
 import argparse
@@ -82,8 +83,13 @@ def worker(args):
               "tolerance": (max(args.tolerance, SINGLE_TOLERANCE_FLOOR)
                             if precision == "single" else args.tolerance),
               "max_iterations": args.max_iterations, "planner": "measure"}
+    options = {}
     if args.no_coarse:
-        solver["petsc_options"] = {"petgap_coarse_start": 0}
+        options["petgap_coarse_start"] = 0
+    if args.edge_correction is not None:
+        options["petgap_edge_correction"] = args.edge_correction
+    if options:
+        solver["petsc_options"] = options
     scene = Scene.from_dict({
         "grid": {"nx": n},
         "surface": {"hurst": 0.8, "lambda_min": 32.0, "lambda_max": n / 2, "rms_slope": 0.1,
@@ -217,6 +223,10 @@ def main():
     parser.add_argument("--tamaas", action="store_true", help="also run Tamaas 2.9 on rank counts of 1")
     parser.add_argument("--no-coarse", action="store_true",
                         help="cold pcg-pressure solves from the uniform pressure, not a coarse grid")
+    parser.add_argument("--edge-correction", type=float, default=None,
+                        help="share of the contact-edge term taken off pcg-pressure's "
+                             "preconditioner (0: the plain restricted stiffness; default: "
+                             "petgap's)")
     parser.add_argument("--protocol", action="store_true",
                         help="the paper's adhesive protocol: solve the non-adhesive load first, "
                              "then the adhesive problem (--work, --range) at its mean gap")
@@ -236,6 +246,8 @@ def main():
             for ranks, precision in itertools.product(args.ranks, args.precision):
                 def arguments(work, mean_gap):
                     out = ["--no-coarse"] if args.no_coarse else []
+                    if args.edge_correction is not None:
+                        out += ["--edge-correction", str(args.edge_correction)]
                     out += ["--solver", args.solver, "--precision", precision,
                             "--tolerance", str(args.tolerance),
                            "--max-iterations", str(args.max_iterations), "--load", str(args.load),

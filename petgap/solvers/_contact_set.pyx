@@ -647,3 +647,108 @@ cdef object _final_gap(real_t kind, object src_, object h_, const unsigned char[
     if nan:
         return float("nan"), float("nan")   # reported, never hidden
     return on, off
+
+
+# ----------------------------------------------------------------------------
+# The contact-edge term of the preconditioner (petgap/solvers/edge_correction.py):
+# kappa = K 1_S kept on the whole slab, updated where S changed by adding or
+# removing a changed point's window of the stiffness kernel.
+
+def changed_points(const unsigned char[:, ::1] mask, const unsigned char[:, ::1] known,
+                   index_t[::1] out):
+    """Flat indices where ``mask`` and ``known`` differ, to ``out`` (as many as fit).
+
+    Returns their number, which may exceed ``len(out)``.  Rows are compared
+    eight bytes at a time first, so that a pass over a slab where little
+    changed reads the two masks once and branches per word.
+    """
+    cdef Py_ssize_t i, j, m = mask.shape[0], n = mask.shape[1], cap = out.shape[0]
+    cdef Py_ssize_t count = 0
+    cdef long differ
+    if known.shape[0] != m or known.shape[1] != n:
+        raise ValueError("changed_points: mask and known do not describe the same slab")
+    with nogil:
+        for i in range(m):
+            differ = 0
+            for j in range(n):
+                differ += mask[i, j] != known[i, j]
+            if differ:
+                for j in range(n):
+                    if mask[i, j] != known[i, j]:
+                        if count < cap:
+                            out[count] = i * n + j
+                        count += 1
+    return count
+
+
+def add_windows(kappa, Py_ssize_t first_row, Py_ssize_t nx, const index_t[::1] rows,
+                const index_t[::1] cols, const signed char[::1] signs,
+                const double[:, ::1] table):
+    """``kappa += sign K(x - y)`` over the window ``table`` around each point ``y``.
+
+    ``kappa`` is this rank's slab, whose first row is the global row
+    ``first_row`` of an ``nx``-row periodic grid; ``rows``, ``cols`` are the
+    global coordinates of the changed points (every rank's, in the same order
+    on every rank), ``signs`` +1 where a point entered S and -1 where it left;
+    ``table[W + di, W + dj]`` is the stiffness kernel ``K`` at the offset
+    ``(di, dj)``, ``|di|, |dj| <= W``.  Rows and columns wrap periodically;
+    the window must be narrower than the grid (``2 W + 1 <= nx, ny``), so that
+    no point of it is visited twice.
+    """
+    if kappa.dtype == _FLOAT32:
+        _add_windows[float](0, kappa, first_row, nx, rows, cols, signs, table)
+    elif kappa.dtype == _FLOAT64:
+        _add_windows[double](0, kappa, first_row, nx, rows, cols, signs, table)
+    else:
+        raise TypeError(f"add_windows: kappa is {kappa.dtype}, not float64 or float32")
+
+
+cdef object _add_windows(real_t kind, object kappa_, Py_ssize_t first_row, Py_ssize_t nx,
+                         const index_t[::1] rows, const index_t[::1] cols,
+                         const signed char[::1] signs, const double[:, ::1] table):
+    cdef real_t[:, ::1] kappa = kappa_
+    cdef Py_ssize_t m = kappa.shape[0], n = kappa.shape[1], w = table.shape[0] // 2
+    cdef Py_ssize_t k, di, dj, r, c
+    cdef double s
+    if table.shape[0] != table.shape[1] or table.shape[0] % 2 == 0:
+        raise ValueError("add_windows: the table must be square with an odd side")
+    if 2 * w + 1 > nx or 2 * w + 1 > n:
+        raise ValueError(f"add_windows: a window of {2 * w + 1} points does not fit a "
+                         f"{nx} x {n} grid")
+    if not (rows.shape[0] == cols.shape[0] == signs.shape[0]):
+        raise ValueError("add_windows: rows, cols and signs differ in length")
+    with nogil:
+        for k in range(rows.shape[0]):
+            s = signs[k]
+            for di in range(-w, w + 1):
+                r = (rows[k] + di + nx) % nx - first_row
+                if r < 0 or r >= m:
+                    continue
+                for dj in range(-w, w + 1):
+                    c = (cols[k] + dj + n) % n
+                    kappa[r, c] = <real_t>(<double>kappa[r, c] + s * table[w + di, w + dj])
+
+
+def subtract_edge_term(zS, gS, kappa, const index_t[::1] idx, double theta):
+    """``zS -= theta kappa[idx] gS``: the preconditioned gap less a share of the edge term."""
+    if _single("subtract_edge_term", "zS gS kappa", (zS, gS, kappa)):
+        _subtract_edge_term[float](0, zS, gS, kappa, idx, theta)
+    else:
+        _subtract_edge_term[double](0, zS, gS, kappa, idx, theta)
+
+
+cdef object _subtract_edge_term(real_t kind, object zS_, object gS_, object kappa_,
+                                const index_t[::1] idx, double theta):
+    cdef real_t[::1] zS = zS_
+    cdef const real_t[::1] gS = gS_
+    cdef const real_t[:, ::1] kappa = kappa_
+    cdef Py_ssize_t k, ns = zS.shape[0]
+    cdef const real_t *kf
+    if gS.shape[0] != ns or idx.shape[0] != ns:
+        raise ValueError("subtract_edge_term: zS, gS and idx differ in length")
+    if ns == 0:
+        return
+    kf = &kappa[0, 0]
+    with nogil:
+        for k in range(ns):
+            zS[k] = <real_t>(<double>zS[k] - theta * <double>kf[idx[k]] * <double>gS[k])

@@ -17,7 +17,10 @@ Solver types
     Force one formulation.  A cold ``pcg-pressure`` solve starts from the
     solution on a grid twice as coarse where the shape allows
     (:mod:`petgap.solvers.coarse`); ``-petgap_coarse_start 0`` starts it from the
-    uniform pressure instead.
+    uniform pressure instead.  Its preconditioner takes a share of the
+    contact-edge term off the restricted stiffness
+    (:mod:`petgap.solvers.edge_correction`); ``-petgap_edge_correction 0``
+    keeps the plain restricted stiffness.
 ``bncg``, ``blmvm``, ``bqnls``, ``gpcg`` (TAO built-ins)
     Bound-constrained minimisation over the gap ``g >= 0`` of the load-control
     energy :meth:`petgap.mechanics.problem.ContactProblem.objective_gradient`, made
@@ -53,6 +56,7 @@ TAO's reason when it stops for any other cause.
 from petsc4py import PETSc
 
 from petgap.mechanics.problem import Indentation, Load, MeanGap
+from petgap.solvers.edge_correction import EDGE_CORRECTION
 from petgap.solvers.free_boundary import solve_on_cell
 from petgap.solvers.mixed_precision import solve_mixed
 from petgap.solvers.pressure_cg import (full_contact_state, solve_mean_gap_by_indentation,
@@ -158,9 +162,10 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
     if precision == "mixed":
         with petsc_options(options):
             coarse = PETSc.Options().getBool("petgap_coarse_start", True)
+            edge = PETSc.Options().getReal("petgap_edge_correction", EDGE_CORRECTION)
         solution = solve_mixed(problem, control, tolerance=tolerance,
                                max_iterations=max_iterations, monitor=monitor,
-                               coarse_start=coarse,
+                               coarse_start=coarse, edge_correction=edge,
                                initial_pressure=None if initial is None else initial.pressure)
     else:
         solution = _solve(problem, control, tao_type, adhesive, tolerance, max_iterations,

@@ -22,6 +22,7 @@ from petgap.io.scene import SINGLE_TOLERANCE_FLOOR
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers.convergence import Timer
+from petgap.solvers.edge_correction import EDGE_CORRECTION
 from petgap.solvers.pressure_cg import polonsky_keer
 
 
@@ -45,7 +46,7 @@ def single_precision_twin(problem):
 
 
 def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monitor=None,
-                coarse_start=True, initial_pressure=None):
+                coarse_start=True, initial_pressure=None, edge_correction=EDGE_CORRECTION):
     """Solve ``problem`` (double precision) under load or mean gap, first in single.
 
     The single-precision solve runs to ``max(tolerance, SINGLE_TOLERANCE_FLOOR)``
@@ -63,8 +64,9 @@ def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monit
     twin = single_precision_twin(problem)
     single = polonsky_keer(twin, control, tolerance=max(tolerance, SINGLE_TOLERANCE_FLOOR),
                            max_iterations=max_iterations, monitor=monitor,
-                           coarse_start=coarse_start, initial_pressure=None if
-                           initial_pressure is None else initial_pressure.astype(np.float32))
+                           coarse_start=coarse_start, edge_correction=edge_correction,
+                           initial_pressure=None if initial_pressure is None
+                           else initial_pressure.astype(np.float32))
     start_ops = single.operator_applications
     pressure = single.pressure.astype(np.float64)
     description = (f"single precision: {single.iterations} iterations, {single.reason} "
@@ -73,7 +75,8 @@ def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monit
     del twin, single
     double = polonsky_keer(problem, control, tolerance=tolerance,
                            max_iterations=max(max_iterations - single_iterations, 1),
-                           initial_pressure=pressure, monitor=monitor)
+                           initial_pressure=pressure, monitor=monitor,
+                           edge_correction=edge_correction)
     del pressure
     double.start = f"{description}; refined in double from its pressure"
     double.iterations += single_iterations

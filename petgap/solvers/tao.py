@@ -27,6 +27,7 @@ from petsc4py import PETSc
 
 from petgap.mechanics.problem import Load, MeanGap
 from petgap.solvers.convergence import Timer
+from petgap.solvers.edge_correction import EDGE_CORRECTION
 from petgap.solvers.gap_cg import gap_cg
 from petgap.solvers.pressure_cg import polonsky_keer
 
@@ -68,7 +69,9 @@ class _PetgapTao:
                 self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
                 initial_pressure=None if self.initial is None else self.initial.pressure,
                 monitor=report,
-                coarse_start=PETSc.Options().getBool("petgap_coarse_start", True))
+                coarse_start=PETSc.Options().getBool("petgap_coarse_start", True),
+                edge_correction=PETSc.Options().getReal("petgap_edge_correction",
+                                                        EDGE_CORRECTION))
         else:
             self.solution = gap_cg(
                 self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
@@ -589,7 +592,7 @@ KNOWN_OPTIONS = {
     "tao_fd_gradient": "bool", "tao_fd_hessian": "bool", "tao_subset_type": "word",
     "tao_ls_type": "word",
     # petgap's own
-    "petgap_coarse_start": "bool",
+    "petgap_coarse_start": "bool", "petgap_edge_correction": "real",
     # PETSc at large (profiling, debugging), read at initialisation or finalisation
     "log_view": "viewer", "log_view_memory": "bool", "log_all": "bool", "log_trace": "viewer",
     "log_exclude": "word", "options_left": "bool", "options_view": "viewer",

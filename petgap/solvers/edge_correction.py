@@ -1,0 +1,168 @@
+"""The contact-edge term of the pressure solver's preconditioner.
+
+:func:`petgap.solvers.pressure_cg.polonsky_keer` preconditions the compliance
+restricted to the contact set ``S``, ``P_S K^{-1} P_S``, with the stiffness
+restricted to the same set, ``P_S K P_S`` (``K`` the half-space's stiffness,
+symbol ``E* |q| / 2``).  Written out at a point ``x`` of ``S``::
+
+    (P_S K P_S g)(x) = sum_{y in S} K(x - y) (g(y) - g(x))  +  kappa(x) g(x),
+    kappa(x) = sum_{y in S} K(x - y) = -sum_{y not in S} K(x - y),
+
+the second form because ``K`` annihilates constants (its symbol vanishes at
+``q = 0``).  The first term couples points of ``S`` with each other only (the
+"regional" stiffness of ``S``); the second, ``kappa >= 0``, is what the zero
+extension of the gap across the contact edge adds.  The off-diagonal kernel
+falls like ``-E* / (4 pi r^3)``, so ``kappa`` grows like the inverse distance
+to the edge, and it is on edge pixels that the preconditioned operator has its
+large eigenvalues: interior modes sit at 1, edge modes above it, and the
+largest grows with the contact patches' size in pixels
+(``benchmarks/edge_spectrum.py`` prints the spectrum; docs/benchmarks.md has
+it).  Taking all of ``kappa`` away leaves the regional stiffness, which does
+not see a patch's constant and is not positive on it; taking a share
+``theta`` of it away,
+
+    z = P_S K P_S g - theta kappa g,
+
+lowers the edge eigenvalues and keeps the interior ones, and the
+conjugate gradients need fewer iterations (docs/benchmarks.md: spectrum,
+iterations, and the robustness set under it).  ``theta`` is a tuning constant,
+:data:`EDGE_CORRECTION`: much above it the discrete kernel's sign changes at
+distance 2 and beyond (the Nyquist modes of ``|q|``) make the operator
+indefinite on some contact sets.
+
+Keeping ``kappa`` current costs almost nothing.  It is the stiffness applied to
+the indicator of ``S``, ``kappa = K 1_S`` (one transform pair), kept on the
+whole slab; when ``S`` changes by a few points, each point that entered adds
+the kernel ``K(x - y)`` over a window of ``(2 W + 1)^2`` points around it and
+each point that left subtracts it (:func:`petgap.solvers._contact_set.add_windows`),
+which leaves out the kernel beyond ``W`` pixels (``|K| < 2e-4 E* / a0`` there
+on a square grid); when more points changed than windows are worth, the pair
+is spent again.  The changed points are found by comparing the contact mask
+with the mask ``kappa`` describes (one read of two byte masks), so every change
+of ``S`` is seen, whichever step made it.  The kernel's window is taken from a
+grid of at most 256^2 points with the same pixel size, on every rank alike, so
+that the windows do not depend on the decomposition.
+
+Memory: ``kappa`` in the grid's precision (8 or 4 bytes per point) and the byte
+mask it describes.
+"""
+import numpy as np
+from mpi4py import MPI
+
+from petgap.parallel.grid import Grid
+from petgap.parallel.log import SET_UPDATE_EVENT, event
+from petgap.solvers import _contact_set as _cs
+from petgap.solvers.contact_set import INDEX
+
+#: The share ``theta`` of the edge term taken off the preconditioner (module
+#: docstring); 0 is the plain restricted stiffness.
+EDGE_CORRECTION = 0.6
+#: Half-width ``W`` of the window over which a changed point updates ``kappa``.
+WINDOW = 8
+#: Side of the largest grid the window's kernel is taken from.
+TABLE_SIDE = 256
+
+
+def kernel_window(grid, contact_modulus, window=WINDOW):
+    """The stiffness kernel ``K(di dx, dj dy)`` for ``|di|, |dj| <= W``, shape ``(2W+1, 2W+1)``.
+
+    From the half-space's own operator on a grid of the same pixel size and at
+    most :data:`TABLE_SIDE` points a side (the grid itself where it is smaller),
+    on ``MPI.COMM_SELF``: the same numbers on every rank.  ``W`` shrinks to fit
+    a small grid (the window may not wrap onto itself).
+    """
+    mx, my = min(grid.nx, TABLE_SIDE), min(grid.ny, TABLE_SIDE)
+    w = min(window, (mx - 1) // 2, (my - 1) // 2)
+    small = Grid((mx, my), size=(mx * grid.dx, my * grid.dy), comm=MPI.COMM_SELF,
+                 planner="estimate", wisdom=False)
+    small.real[...] = 0.0
+    small.real[0, 0] = 1.0
+    # K delta as ElasticHalfSpace applies it (scale E* / 2 with the 1 / N of the inverse
+    # transform), but not one of its counted applications: the solvers' operator count
+    # and its PETSc log event stay those of the solve
+    k = small.convolve_qpower(contact_modulus / (2.0 * small.npoints), 1)
+    rows, cols = np.arange(-w, w + 1) % mx, np.arange(-w, w + 1) % my
+    return np.ascontiguousarray(k[np.ix_(rows, cols)])
+
+
+class EdgeCorrection:
+    """``kappa = K 1_S`` on a contact mask, kept current, and the preconditioner's correction.
+
+    Parameters
+    ----------
+    half_space : ElasticHalfSpace or FreeHalfSpace
+        Whose stiffness (``apply_in_buffer(inverse=False)``: the periodic
+        stiffness, also on a free boundary, where it is the preconditioner) the
+        preconditioner applies.
+    mask : ndarray of uint8, shape ``grid.local_shape``
+        The contact set's mask (:class:`petgap.solvers.contact_set.ContactSet`),
+        read whenever :meth:`subtract` is called.
+    theta : float
+        The share of ``kappa`` taken off (:data:`EDGE_CORRECTION`).
+    """
+
+    def __init__(self, half_space, mask, theta=EDGE_CORRECTION):
+        grid = half_space.grid
+        self.half_space, self.mask, self.theta = half_space, mask, float(theta)
+        self.table = kernel_window(grid, half_space.contact_modulus)
+        self.kappa = None
+        self._known = None
+        # beyond this many changed points (over all ranks) the transform is cheaper
+        self._most = max(1, grid.npoints // (8 * self.table.size))
+        self._changed = np.empty(self._most + 1, dtype=INDEX)
+        #: transforms spent on ``kappa`` (also counted in the half-space's applications)
+        self.transforms = 0
+
+    def refresh(self):
+        """``kappa = K 1_S`` from scratch: one transform pair.  Collective."""
+        grid = self.half_space.grid
+        np.copyto(grid.real, self.mask)
+        self.half_space.apply_in_buffer(inverse=False)
+        if self.kappa is None:
+            self.kappa = np.empty(grid.local_shape, dtype=grid.dtype)
+            self._known = np.empty_like(self.mask)
+        np.copyto(self.kappa, grid.real)
+        np.copyto(self._known, self.mask)
+        self.transforms += 1
+
+    def update(self):
+        """Bring ``kappa`` to the mask's present ``S``: windows, or a transform.  Collective."""
+        if self.kappa is None:
+            return self.refresh()
+        grid = self.half_space.grid
+        comm = grid.comm
+        with event(SET_UPDATE_EVENT):
+            count = _cs.changed_points(self.mask, self._known, self._changed)
+            total = comm.allreduce(count, op=MPI.SUM)
+        if total > self._most:
+            return self.refresh()
+        if total == 0:
+            return None
+        with event(SET_UPDATE_EVENT):
+            local = self._changed[:count]
+            ny = grid.ny
+            signs = np.where(self.mask.ravel()[local] != 0, 1, -1).astype(np.int8)
+            rows = (local // ny + grid.x_slice.start).astype(INDEX)
+            cols = (local % ny).astype(INDEX)
+            if comm.size > 1:
+                counts = comm.allgather(count)
+                rows, cols, signs = (_allgather(comm, a, counts) for a in (rows, cols, signs))
+            _cs.add_windows(self.kappa, grid.x_slice.start, grid.nx, rows, cols, signs,
+                            self.table)
+            self._known.ravel()[local] = self.mask.ravel()[local]
+        return None
+
+    def subtract(self, zS, gS, idx):
+        """``zS -= theta kappa gS`` on ``S`` (indices ``idx``), ``kappa`` first brought up to date.
+
+        Collective (the update may take a transform).
+        """
+        self.update()
+        _cs.subtract_edge_term(zS, gS, self.kappa, idx, self.theta)
+
+
+def _allgather(comm, local, counts):
+    """Every rank's ``local`` (1-D, ``counts[r]`` entries on rank ``r``), concatenated in rank order."""
+    out = np.empty(sum(counts), dtype=local.dtype)
+    comm.Allgatherv(np.ascontiguousarray(local), [out, counts])
+    return out
