@@ -107,8 +107,9 @@ class EdgeCorrection:
         self.table = kernel_window(grid, half_space.contact_modulus)
         self.kappa = None
         self._known = None
-        # beyond this many changed points (over all ranks) the transform is cheaper
-        self._most = max(1, grid.npoints // (8 * self.table.size))
+        # beyond this many changed points (over all ranks) a transform is cheaper: their
+        # windows would make half a pass of scattered updates over the slab
+        self._most = max(1, grid.npoints // (2 * self.table.size))
         self._changed = np.empty(self._most + 1, dtype=INDEX)
         #: transforms spent on ``kappa`` (also counted in the half-space's applications)
         self.transforms = 0

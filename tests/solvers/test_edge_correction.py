@@ -62,7 +62,7 @@ def test_the_window_fits_a_small_grid():
 @pytest.mark.parametrize("precision, tol", [("double", 1e-12), ("single", 2e-6)])
 def test_kappa_follows_the_mask(comm, precision, tol):
     """A transform, then windows for a few changes, then a transform for many."""
-    shape = (320, 256)   # room for 35 windows before a transform is cheaper
+    shape = (320, 256)   # room for 141 windows before a transform is cheaper
     grid = Grid(shape, size=SIZE, comm=comm, planner="estimate", precision=precision)
     half_space = ElasticHalfSpace(grid, E_STAR)
     full = random_mask(shape, 1)
