@@ -17,11 +17,14 @@ in all, the largest count, the worst KKT residual, the largest difference in
 contact fraction between the two starts) and exits with status 1 if any solve
 did not converge.  ``--restart-fraction 0`` runs Polonsky and Keer's own
 restart rule (conjugacy dropped whenever a point enters the contact set) for
-comparison with petgap's (:data:`petgap.solvers.pressure_cg.RESTART_FRACTION`).
+comparison with petgap's (:data:`petgap.solvers.pressure_cg.RESTART_FRACTION`);
+``--edge-correction 0`` the plain restricted stiffness as the preconditioner
+(:data:`petgap.solvers.edge_correction.EDGE_CORRECTION` is petgap's share of
+the contact-edge term taken off it).
 
 Usage (serially or under ``mpirun -n P``)::
 
-    python benchmarks/robustness.py [--restart-fraction F] [--quick]
+    python benchmarks/robustness.py [--restart-fraction F] [--edge-correction THETA] [--quick]
 """
 import argparse
 import sys
@@ -43,11 +46,16 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--restart-fraction", type=float, default=None,
                         help="override petgap.solvers.pressure_cg.RESTART_FRACTION")
+    parser.add_argument("--edge-correction", type=float, default=None,
+                        help="override petgap.solvers.edge_correction.EDGE_CORRECTION")
     parser.add_argument("--quick", action="store_true", help="one seed per surface kind")
     args = parser.parse_args()
 
     import petgap
     from petgap.solvers import pressure_cg
+    from petgap.solvers.edge_correction import EDGE_CORRECTION
+
+    theta = EDGE_CORRECTION if args.edge_correction is None else args.edge_correction
 
     if args.restart_fraction is not None:
         pressure_cg.RESTART_FRACTION = args.restart_fraction
@@ -70,7 +78,8 @@ def main():
                 fractions = []
                 for coarse_start in (True, False):
                     s = pressure_cg.polonsky_keer(problem, control, tolerance=1e-8,
-                                                  coarse_start=coarse_start)
+                                                  coarse_start=coarse_start,
+                                                  edge_correction=theta)
                     solves += 1
                     converged += bool(s.converged)
                     iterations += s.iterations
@@ -87,7 +96,7 @@ def main():
                      worst_dc))
     if comm.rank == 0:
         rule = pressure_cg.RESTART_FRACTION
-        print(f"restart fraction {rule:g}, {comm.size} rank(s), "
+        print(f"restart fraction {rule:g}, edge correction {theta:g}, {comm.size} rank(s), "
               f"{time.perf_counter() - started:.0f} s\n")
         print("| surfaces | seeds | solves | converged | fine iterations | most | worst KKT "
               "| largest c difference between starts |")
