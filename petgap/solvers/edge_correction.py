@@ -46,6 +46,8 @@ that the windows do not depend on the decomposition.
 Memory: ``kappa`` in the grid's precision (8 or 4 bytes per point) and the byte
 mask it describes.
 """
+import functools
+
 import numpy as np
 from mpi4py import MPI
 
@@ -66,23 +68,35 @@ TABLE_SIDE = 256
 def kernel_window(grid, contact_modulus, window=WINDOW):
     """The stiffness kernel ``K(di dx, dj dy)`` for ``|di|, |dj| <= W``, shape ``(2W+1, 2W+1)``.
 
-    From the half-space's own operator on a grid of the same pixel size and at
+    From the half-space's own operator on a grid of the same pixel shape and at
     most :data:`TABLE_SIDE` points a side (the grid itself where it is smaller),
     on ``MPI.COMM_SELF``: the same numbers on every rank.  ``W`` shrinks to fit
-    a small grid (the window may not wrap onto itself).
+    a small grid (the window may not wrap onto itself).  The kernel is ``E* / dx``
+    times a function of the pixels' aspect ratio (the symbol ``E* |q| / 2`` is
+    homogeneous in ``q``), so the levels of a coarse start of 256 points a side
+    or more, whose pixels double, share one computation, and later solves reuse
+    it.
     """
     mx, my = min(grid.nx, TABLE_SIDE), min(grid.ny, TABLE_SIDE)
     w = min(window, (mx - 1) // 2, (my - 1) // 2)
-    small = Grid((mx, my), size=(mx * grid.dx, my * grid.dy), comm=MPI.COMM_SELF,
+    return contact_modulus / grid.dx * _unit_kernel_window(mx, my, grid.dy / grid.dx, w)
+
+
+@functools.lru_cache(maxsize=32)
+def _unit_kernel_window(mx, my, aspect, w):
+    """:func:`kernel_window` for ``E* = 1`` and ``dx = 1``, ``dy = aspect`` (read-only)."""
+    small = Grid((mx, my), size=(float(mx), my * aspect), comm=MPI.COMM_SELF,
                  planner="estimate", wisdom=False)
     small.real[...] = 0.0
     small.real[0, 0] = 1.0
-    # K delta as ElasticHalfSpace applies it (scale E* / 2 with the 1 / N of the inverse
-    # transform), but not one of its counted applications: the solvers' operator count
-    # and its PETSc log event stay those of the solve
-    k = small.convolve_qpower(contact_modulus / (2.0 * small.npoints), 1)
+    # K delta as ElasticHalfSpace applies it (scale E* / 2, here 1 / 2, with the 1 / N of
+    # the inverse transform), but not one of its counted applications: the solvers'
+    # operator count and its PETSc log event stay those of the solve
+    k = small.convolve_qpower(1.0 / (2.0 * small.npoints), 1)
     rows, cols = np.arange(-w, w + 1) % mx, np.arange(-w, w + 1) % my
-    return np.ascontiguousarray(k[np.ix_(rows, cols)])
+    table = np.ascontiguousarray(k[np.ix_(rows, cols)])
+    table.flags.writeable = False
+    return table
 
 
 class EdgeCorrection:
