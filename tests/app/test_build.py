@@ -192,7 +192,7 @@ def test_single_precision_scene_solves_the_double_surface_rounded(comm):
     """``solver.precision = "single"``: a single-precision grid and problem carrying the very
     surface of the double scene (made in double, then rounded), solved to the single
     tolerance with the contact set of the double solve; mixed solves a double problem."""
-    single = dict(SCENE, solver=dict(SCENE["solver"], precision="single", tolerance=2e-6))
+    single = dict(SCENE, solver=dict(SCENE["solver"], precision="single", tolerance=3e-6))
     mixed = dict(SCENE, solver=dict(SCENE["solver"], precision="mixed"))
     models = [build(Scene.from_dict(s, comm), comm) for s in (SCENE, single, mixed)]
     states = [list(m.sweep()) for m in models]
@@ -207,7 +207,7 @@ def test_single_precision_scene_solves_the_double_surface_rounded(comm):
     for ref, one, other in zip(*states):
         assert ref.converged and one.converged and other.converged
         assert (one.precision, other.precision) == ("single", "mixed")
-        assert one.kkt_gap <= 2e-6 and other.kkt_gap <= 1e-7
+        assert one.kkt_gap <= 3e-6 and other.kkt_gap <= 1e-7
         assert one.contact_fraction == pytest.approx(ref.contact_fraction, rel=2e-3)
         assert other.contact_fraction == ref.contact_fraction
         assert other.mean_gap == pytest.approx(ref.mean_gap, rel=1e-6)
@@ -219,7 +219,7 @@ def test_single_precision_run_stores_its_fields_in_32_bits(comm, mpi_tmp_path):
     import h5py  # deferred: the only test here that reads a result file
     from petgap.app import run_scene
     from petgap.io.results import read_field
-    single = dict(SCENE, solver=dict(SCENE["solver"], precision="single", tolerance=2e-6))
+    single = dict(SCENE, solver=dict(SCENE["solver"], precision="single", tolerance=3e-6))
     scene = Scene.from_dict(single, comm)
     out = mpi_tmp_path / "single.h5"
     run_scene(scene, comm, out)

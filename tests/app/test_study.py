@@ -258,7 +258,7 @@ def test_cli_quick_writes_table_and_figure(comm, mpi_tmp_path, run_cli):
     # single at its tolerance floor, mixed and double at the scene's; double is the
     # tolerance ladder's 1e-08 solve, measured once
     assert [(r["precision"], r["tolerance"]) for r in rows[6:]] == [
-        ("single", "2e-06"), ("mixed", "1e-08"), ("double", "1e-08")]
+        ("single", "3e-06"), ("mixed", "1e-08"), ("double", "1e-08")]
     assert rows[8]["shared_with"] == "tolerance rung 1e-08"
     assert all(r["converged"] == "True" and float(r["err_c"]) < 1e-3 for r in rows[6:8])
     assert "precision ladder at tolerance 1e-08, 32 x 32" in proc.stdout
