@@ -36,7 +36,7 @@ to .npy, and solved
 Usage::
 
     python benchmarks/contact.py --sizes 512 1024 2048 --ranks 1 2 [--rounds 5] [--tamaas] [--no-coarse]
-        [--edge-correction THETA]
+        [--edge-correction THETA [THETA ...]]
         [--protocol --work W] [--precision double single mixed]
 """
 import argparse
@@ -86,8 +86,8 @@ def worker(args):
     options = {}
     if args.no_coarse:
         options["petgap_coarse_start"] = 0
-    if args.edge_correction is not None:
-        options["petgap_edge_correction"] = args.edge_correction
+    if args.edge_correction[0] is not None:   # a worker is given one value
+        options["petgap_edge_correction"] = args.edge_correction[0]
     if options:
         solver["petsc_options"] = options
     scene = Scene.from_dict({
@@ -223,10 +223,10 @@ def main():
     parser.add_argument("--tamaas", action="store_true", help="also run Tamaas 2.9 on rank counts of 1")
     parser.add_argument("--no-coarse", action="store_true",
                         help="cold pcg-pressure solves from the uniform pressure, not a coarse grid")
-    parser.add_argument("--edge-correction", type=float, default=None,
-                        help="share of the contact-edge term taken off pcg-pressure's "
-                             "preconditioner (0: the plain restricted stiffness; default: "
-                             "petgap's)")
+    parser.add_argument("--edge-correction", type=float, nargs="+", default=[None],
+                        help="shares of the contact-edge term taken off pcg-pressure's "
+                             "preconditioner, a row each (0: the plain restricted stiffness; "
+                             "default: petgap's)")
     parser.add_argument("--protocol", action="store_true",
                         help="the paper's adhesive protocol: solve the non-adhesive load first, "
                              "then the adhesive problem (--work, --range) at its mean gap")
@@ -243,11 +243,12 @@ def main():
         for n in args.sizes:
             surface = Path(tmp) / f"h{n}.npy"
             tam = None
-            for ranks, precision in itertools.product(args.ranks, args.precision):
+            for ranks, precision, edge in itertools.product(args.ranks, args.precision,
+                                                            args.edge_correction):
                 def arguments(work, mean_gap):
                     out = ["--no-coarse"] if args.no_coarse else []
-                    if args.edge_correction is not None:
-                        out += ["--edge-correction", str(args.edge_correction)]
+                    if edge is not None:
+                        out += ["--edge-correction", str(edge)]
                     out += ["--solver", args.solver, "--precision", precision,
                             "--tolerance", str(args.tolerance),
                            "--max-iterations", str(args.max_iterations), "--load", str(args.load),
@@ -308,7 +309,8 @@ def main():
                 if tam is not None and ranks == 1:
                     t_cols = [str(tam["iterations"]), f"{tam['time']:.2f}", f"{tam['kkt_gap']:.1e}",
                               f"{res['wall_time'] / tam['time']:.3f}"]
-                print(f"| {n}^2 | {ranks} | {res['solver']} ({precision}) | {res['iterations']} "
+                label = precision if edge is None else f"{precision}, edge correction {edge:g}"
+                print(f"| {n}^2 | {ranks} | {res['solver']} ({label}) | {res['iterations']} "
                       f"| {pairs:.2f} | "
                       f"{per_it:.4f} | {floor:.4f} | {ratio:.2f} | "
                       + (f"{operator_ratio:.2f} | {100 * rest:.0f} % | " if operator_ratio > 0
