@@ -658,9 +658,9 @@ def changed_points(const unsigned char[:, ::1] mask, const unsigned char[:, ::1]
                    index_t[::1] out):
     """Flat indices where ``mask`` and ``known`` differ, to ``out`` (as many as fit).
 
-    Returns their number, which may exceed ``len(out)``.  Rows are compared
-    eight bytes at a time first, so that a pass over a slab where little
-    changed reads the two masks once and branches per word.
+    Returns their number, which may exceed ``len(out)``.  Each row is first
+    counted by a branch-free loop the compiler vectorises, and only rows with
+    changes are swept again, from cache, to record them.
     """
     cdef Py_ssize_t i, j, m = mask.shape[0], n = mask.shape[1], cap = out.shape[0]
     cdef Py_ssize_t count = 0
@@ -752,3 +752,29 @@ cdef object _subtract_edge_term(real_t kind, object zS_, object gS_, object kapp
     with nogil:
         for k in range(ns):
             zS[k] = <real_t>(<double>zS[k] - theta * <double>kf[idx[k]] * <double>gS[k])
+
+
+def edge_sums(gS, kappa, const index_t[::1] idx):
+    """Returns ``(sum kappa g, sum kappa g^2)`` over S, ``kappa`` read at ``idx``."""
+    if _single("edge_sums", "gS kappa", (gS, kappa)):
+        return _edge_sums[float](0, gS, kappa, idx)
+    return _edge_sums[double](0, gS, kappa, idx)
+
+
+cdef object _edge_sums(real_t kind, object gS_, object kappa_, const index_t[::1] idx):
+    cdef const real_t[::1] gS = gS_
+    cdef const real_t[:, ::1] kappa = kappa_
+    cdef Py_ssize_t k, ns = gS.shape[0]
+    cdef double kg, skg = 0.0, skgg = 0.0
+    cdef const real_t *kf
+    if idx.shape[0] != ns:
+        raise ValueError("edge_sums: gS and idx differ in length")
+    if ns == 0:
+        return 0.0, 0.0
+    kf = &kappa[0, 0]
+    with nogil:
+        for k in range(ns):
+            kg = <double>kf[idx[k]] * <double>gS[k]
+            skg += kg
+            skgg += kg * <double>gS[k]
+    return skg, skgg

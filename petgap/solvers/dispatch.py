@@ -150,7 +150,9 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
         with petsc_options(options):
             return solve_mean_gap_by_indentation(
                 problem, control, tolerance=tolerance, max_iterations=max_iterations,
-                initial_pressure=None if initial is None else initial.pressure, monitor=monitor)
+                initial_pressure=None if initial is None else initial.pressure, monitor=monitor,
+                edge_correction=PETSc.Options().getReal("petgap_edge_correction",
+                                                        EDGE_CORRECTION))
     checked = 0
     if isinstance(control, Load) and not adhesive and periodic:
         before = problem.operator_applications

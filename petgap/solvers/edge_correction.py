@@ -34,14 +34,21 @@ Keeping ``kappa`` current costs almost nothing.  It is the stiffness applied to
 the indicator of ``S``, ``kappa = K 1_S`` (one transform pair), kept on the
 whole slab; when ``S`` changes by a few points, each point that entered adds
 the kernel ``K(x - y)`` over a window of ``(2 W + 1)^2`` points around it and
-each point that left subtracts it (:func:`petgap.solvers._contact_set.add_windows`),
-which leaves out the kernel beyond ``W`` pixels (``|K| < 2e-4 E* / a0`` there
-on a square grid); when more points changed than windows are worth, the pair
-is spent again.  The changed points are found by comparing the contact mask
-with the mask ``kappa`` describes (one read of two byte masks), so every change
-of ``S`` is seen, whichever step made it.  The kernel's window is taken from a
-grid of at most 256^2 points with the same pixel size, on every rank alike, so
-that the windows do not depend on the decomposition.
+each point that left subtracts it (:func:`petgap.solvers._contact_set.add_windows`).
+The windows leave out the kernel beyond ``W`` pixels: off the grid's axes it is
+below ``2.4e-4 E* / a0`` there, along them it falls like ``0.14 E* / (a0 r^2)``
+(the symbol's kink at the Nyquist lines; ``1.8e-3 E* / a0`` at ``r = 9``), about
+a tenth of ``K(0)`` in all per changed point.  So the pair is spent again when
+more points changed at once than windows are worth, and once :data:`DRIFT`
+times as many have changed since the last transform, which bounds what the
+omissions add up to.  The changed points are found by comparing
+the contact mask with the mask ``kappa`` describes (one read of two byte
+masks), so every change of ``S`` is seen, whichever step made it; each goes to
+the ranks whose rows its window reaches.  The kernel's window is taken from a
+grid of at most 256^2 points with the same pixel size, on every rank alike, and
+each point of ``kappa`` receives its windows in the global order of the
+changed points, so that ``kappa`` does not depend on the decomposition beyond
+the round-off of its transforms.
 
 Memory: ``kappa`` in the grid's precision (8 or 4 bytes per point) and the byte
 mask it describes.
@@ -63,6 +70,9 @@ EDGE_CORRECTION = 0.6
 WINDOW = 8
 #: Side of the largest grid the window's kernel is taken from.
 TABLE_SIDE = 256
+#: Changed points since the last transform of ``kappa``, in units of the most one
+#: update takes by windows, after which the next update transforms (module docstring).
+DRIFT = 4
 
 
 def kernel_window(grid, contact_modulus, window=WINDOW):
@@ -110,7 +120,7 @@ class EdgeCorrection:
         preconditioner applies.
     mask : ndarray of uint8, shape ``grid.local_shape``
         The contact set's mask (:class:`petgap.solvers.contact_set.ContactSet`),
-        read whenever :meth:`subtract` is called.
+        read whenever :meth:`sums` is called.
     theta : float
         The share of ``kappa`` taken off (:data:`EDGE_CORRECTION`).
     """
@@ -121,10 +131,15 @@ class EdgeCorrection:
         self.table = kernel_window(grid, half_space.contact_modulus)
         self.kappa = None
         self._known = None
-        # beyond this many changed points (over all ranks) a transform is cheaper: their
-        # windows would make half a pass of scattered updates over the slab
+        # beyond this many changed points (over all ranks) in one update a transform is
+        # cheaper: their windows would make half a pass of scattered updates over the
+        # grid; and beyond DRIFT times as many since the last transform, the kernel
+        # left out of the windows has added up enough to take one (module docstring)
         self._most = max(1, grid.npoints // (2 * self.table.size))
-        self._changed = np.empty(self._most + 1, dtype=INDEX)
+        self._since_transform = 0
+        self._changed = np.empty(1024, dtype=INDEX)
+        #: the rows each rank holds, to send a changed point to the ranks its window reaches
+        self._slabs = grid.comm.allgather((grid.x_slice.start, grid.x_slice.stop))
         #: transforms spent on ``kappa`` (also counted in the half-space's applications)
         self.transforms = 0
 
@@ -138,6 +153,7 @@ class EdgeCorrection:
             self._known = np.empty_like(self.mask)
         np.copyto(self.kappa, grid.real)
         np.copyto(self._known, self.mask)
+        self._since_transform = 0
         self.transforms += 1
 
     def update(self):
@@ -149,35 +165,61 @@ class EdgeCorrection:
         with event(SET_UPDATE_EVENT):
             count = _cs.changed_points(self.mask, self._known, self._changed)
             total = comm.allreduce(count, op=MPI.SUM)
-        if total > self._most:
-            return self.refresh()
         if total == 0:
             return None
+        self._since_transform += total
+        if total > self._most or self._since_transform > DRIFT * self._most:
+            return self.refresh()
         with event(SET_UPDATE_EVENT):
+            if count > len(self._changed):
+                self._changed = np.empty(2 * count, dtype=INDEX)
+                _cs.changed_points(self.mask, self._known, self._changed)
             local = self._changed[:count]
-            ny = grid.ny
-            signs = np.where(self.mask.ravel()[local] != 0, 1, -1).astype(np.int8)
-            rows = (local // ny + grid.x_slice.start).astype(INDEX)
-            cols = (local % ny).astype(INDEX)
+            points = np.empty((count, 3), dtype=INDEX)   # global row, column, sign
+            points[:, 0] = local // grid.ny + grid.x_slice.start
+            points[:, 1] = local % grid.ny
+            points[:, 2] = np.where(self.mask.ravel()[local] != 0, 1, -1)
             if comm.size > 1:
-                counts = comm.allgather(count)
-                rows, cols, signs = (_allgather(comm, a, counts) for a in (rows, cols, signs))
-            _cs.add_windows(self.kappa, grid.x_slice.start, grid.nx, rows, cols, signs,
-                            self.table)
+                points = self._exchange(points)
+            _cs.add_windows(self.kappa, grid.x_slice.start, grid.nx,
+                            np.ascontiguousarray(points[:, 0]),
+                            np.ascontiguousarray(points[:, 1]),
+                            points[:, 2].astype(np.int8), self.table)
             self._known.ravel()[local] = self.mask.ravel()[local]
         return None
 
-    def subtract(self, zS, gS, idx):
-        """``zS -= theta kappa gS`` on ``S`` (indices ``idx``), ``kappa`` first brought up to date.
+    def _exchange(self, points):
+        """Every rank's changed points whose windows reach this rank's rows, in rank order.
 
-        Collective (the update may take a transform).
+        A window covers rows ``i - W .. i + W`` (periodically); it reaches the
+        rows ``a <= row < b`` if its last row lies less than ``b - a + 2 W`` rows
+        past ``a``.
+        """
+        comm, nx = self.half_space.grid.comm, self.half_space.grid.nx
+        w = self.table.shape[0] // 2
+        rows = points[:, 0]
+        pieces = [points[(rows + w - a) % nx < (b - a) + 2 * w] for a, b in self._slabs]
+        send = np.concatenate(pieces)
+        send_counts = np.array([3 * len(piece) for piece in pieces])
+        recv_counts = np.empty_like(send_counts)
+        comm.Alltoall(send_counts, recv_counts)
+        received = np.empty((recv_counts.sum() // 3, 3), dtype=INDEX)
+        comm.Alltoallv([send, send_counts], [received, recv_counts])
+        return received
+
+    def sums(self, gS, idx):
+        """This rank's ``(sum kappa g, sum kappa g^2)`` over ``S``, ``kappa`` brought up to date.
+
+        What the correction changes in the sums of ``z``: ``sum z`` by
+        ``-theta sum kappa g``, ``(g, z)`` by ``-theta sum kappa g^2``, so that the
+        caller can tell whether the corrected preconditioner is positive on the
+        gap before applying it.  Collective (the update may take a transform).
         """
         self.update()
+        return _cs.edge_sums(gS, self.kappa, idx)
+
+    def subtract(self, zS, gS, idx):
+        """``zS -= theta kappa gS`` on ``S`` (indices ``idx``), ``kappa`` as :meth:`sums` left it."""
         _cs.subtract_edge_term(zS, gS, self.kappa, idx, self.theta)
 
 
-def _allgather(comm, local, counts):
-    """Every rank's ``local`` (1-D, ``counts[r]`` entries on rank ``r``), concatenated in rank order."""
-    out = np.empty(sum(counts), dtype=local.dtype)
-    comm.Allgatherv(np.ascontiguousarray(local), [out, counts])
-    return out

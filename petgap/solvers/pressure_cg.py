@@ -341,18 +341,22 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # under load control
             zS = contact.z
             half_space.apply_sparse(pidx, gS, inverse=False, gathered=zS)
-            if edge is not None:
-                edge.subtract(zS, gS, idx)
-            sum_z, gz, g_sq = global_sums(comm, *_cs.z_sums(zS, gS), g_norm)
-            if edge is not None and not gz > 0:
-                # the corrected preconditioner is not positive on this gap: take the
-                # correction back and solve on without it (counted in the solution)
-                _cs.subtract_edge_term(zS, gS, edge.kappa, idx, -edge.theta)
-                sum_z, gz, g_sq = global_sums(comm, *_cs.z_sums(zS, gS), g_norm)
-                edge = None
-                get_logger("pressure_cg").info(
-                    "iteration %d: the contact-edge correction of the preconditioner is not "
-                    "positive on the gap; going on without it", it)
+            if edge is None:
+                sum_z, kz, g_sq = global_sums(comm, *_cs.z_sums(zS, gS), g_norm)
+                gz = kz
+            else:
+                # z less theta kappa g, if that is still positive on the gap
+                sum_z, kz, g_sq, sum_kg, sum_kgg = global_sums(
+                    comm, *_cs.z_sums(zS, gS), g_norm, *edge.sums(gS, idx))
+                gz = kz - edge.theta * sum_kgg
+                if gz > 0:
+                    edge.subtract(zS, gS, idx)
+                    sum_z -= edge.theta * sum_kg
+                else:
+                    get_logger("pressure_cg").info(
+                        "iteration %d: the contact-edge correction of the preconditioner is "
+                        "not positive on the gap; going on without it", it)
+                    edge, gz, delta = None, kz, 0.0   # a new preconditioner: restart
             zshift = sum_z / n_contact if load else 0.0
             # Pressure per unit penetration given to entering points (below):
             # plain Polonsky-Keer steps along the gap, so its step length tau
@@ -360,7 +364,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # on the gap; here tau is a pure number and the direction a
             # pressure, so the same scale is supplied explicitly, as the
             # Rayleigh quotient (g, K g) / (g, g) of the stiffness on the gap.
-            stiffness = gz / g_sq if g_sq > 0 else 0.0
+            stiffness = kz / g_sq if g_sq > 0 else 0.0
             g_norm = gz
             zS_, zshift_ = zS, zshift
         else:
@@ -404,6 +408,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             _cs.recurrence(u, padded, tau, scale, ny)
             contact.p[...] *= scale
             scale = 1.0
+    edge = None   # kappa and its mask: freed before the result's fields are made
 
     # Residuals are taken on the gap as computed; the stored field (and the
     # scalars derived from it) is its projection onto the contact state found:
@@ -543,7 +548,8 @@ def full_contact_state(problem, control, timer=None):
 
 
 def solve_mean_gap_by_indentation(problem, control, *, tolerance=1e-8, max_iterations=10000,
-                                  initial_pressure=None, monitor=None, max_solves=50):
+                                  initial_pressure=None, monitor=None, max_solves=50,
+                                  edge_correction=EDGE_CORRECTION):
     """Mean-gap control on a free boundary: the indentation whose solution has the mean gap.
 
     On a free boundary the displacement has a mean of its own, so a mean gap
@@ -579,7 +585,8 @@ def solve_mean_gap_by_indentation(problem, control, *, tolerance=1e-8, max_itera
         solution = polonsky_keer(problem, Indentation(depth), tolerance=tolerance,
                                  max_iterations=max(max_iterations - iterations, 1),
                                  initial_pressure=pressure, monitor=monitor,
-                                 coarse_start=pressure is None)
+                                 coarse_start=pressure is None,
+                                 edge_correction=edge_correction)
         solves += 1
         iterations += solution.iterations
         history.extend(solution.history)

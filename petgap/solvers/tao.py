@@ -429,8 +429,11 @@ def solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial,
         # the same surface against a hard wall; its applications count as this
         # solve's (the half-space is shared)
         hard = problem.with_interaction(None)
+        with petsc_options(options):
+            edge = PETSc.Options().getReal("petgap_edge_correction", EDGE_CORRECTION)
         seed = polonsky_keer(hard, Load(max(target, 1e-3 * problem.pressure_scale)),
-                             tolerance=max(tolerance, 1e-6), max_iterations=max_iterations)
+                             tolerance=max(tolerance, 1e-6), max_iterations=max_iterations,
+                             edge_correction=edge)
         iterations += seed.iterations
         gap_guess, state = seed.mean_gap, seed
     points, history = [], []
