@@ -125,7 +125,7 @@ def test_slab_beyond_the_index_range_names_the_grid(comm):
 
 
 def test_memory_estimate_refuses_what_cannot_fit(comm):
-    """32768^2 needs about 45 GiB per rank on two ranks: more than any test machine has."""
+    """32768^2 needs some 60 GB in all for the pressure solver: more than any test machine has."""
     scene = Scene.from_text(SCENE.format(solver="").replace("nx = 32", "nx = 32768"), comm)
     with pytest.raises(SceneError) as info:
         check_size(scene, comm)
