@@ -2,7 +2,7 @@
 """A performance model of a petgap solve, fitted here, used to plan cluster runs.
 
 One iteration of the default solver (``pcg-pressure``) costs ``k`` FFT pairs (``k`` about
-2.8-2.9: ``docs/benchmarks.md``) plus passes over the contact set and the slab, and a few
+2.6-3.1: ``docs/benchmarks.md``) plus passes over the contact set and the slab, and a few
 reductions.  The model:
 
 * **FFT pair** on ``P`` ranks of an ``n x n`` grid (``N = n^2`` points)::
@@ -49,14 +49,14 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-#: FFT pairs per iteration of pcg-pressure (docs/benchmarks.md: 2.77-2.97).
+#: FFT pairs per iteration of pcg-pressure (docs/benchmarks.md: 2.6-3.1).
 PAIRS_PER_ITERATION = 2.9
 #: Bytes per point and fixed bytes per rank of a whole non-adhesive run (docs/benchmarks.md,
-#: "Memory per point": 36.5-39.7 measured at 4096^2-16384^2 on one rank, rounded up).
-BYTES_PER_POINT, FIXED_BYTES = 40.0, 91e6
+#: "Memory per point": 43.4-45.1 measured at 4096^2-16384^2 on one rank, rounded up).
+BYTES_PER_POINT, FIXED_BYTES = 46.0, 91e6
 #: Iterations of the GUIDE surface at 512^2-16384^2 (docs/benchmarks.md, "Non-adhesive rough
 #: contact" and "16384^2 on this machine").
-ITERATIONS = {512: 16, 1024: 19, 2048: 22, 4096: 28, 8192: 35, 16384: 42}
+ITERATIONS = {512: 13, 1024: 16, 2048: 18, 4096: 23, 8192: 29, 16384: 34}
 
 
 def solve_worker(n):
