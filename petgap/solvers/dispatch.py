@@ -56,13 +56,13 @@ TAO's reason when it stops for any other cause.
 from petsc4py import PETSc
 
 from petgap.mechanics.problem import Indentation, Load, MeanGap
-from petgap.solvers.edge_correction import EDGE_CORRECTION
 from petgap.solvers.free_boundary import solve_on_cell
 from petgap.solvers.mixed_precision import solve_mixed
 from petgap.solvers.pressure_cg import (full_contact_state, solve_mean_gap_by_indentation,
                                         touching_state)
-from petgap.solvers.tao import (PETGAP_TYPES, petsc_options, solve_load_by_mean_gap,
-                                solve_mean_gap_by_multiplier, tao_solve)
+from petgap.solvers.tao import (PETGAP_TYPES, petsc_options, pressure_solver_options,
+                                solve_load_by_mean_gap, solve_mean_gap_by_multiplier,
+                                tao_solve)
 
 #: Solver types a scene may name.
 SOLVER_TYPES = ("pcg", "pcg-pressure", "pcg-gap", "bncg", "blmvm", "bqnls", "gpcg")
@@ -151,8 +151,7 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
             return solve_mean_gap_by_indentation(
                 problem, control, tolerance=tolerance, max_iterations=max_iterations,
                 initial_pressure=None if initial is None else initial.pressure, monitor=monitor,
-                edge_correction=PETSc.Options().getReal("petgap_edge_correction",
-                                                        EDGE_CORRECTION))
+                edge_correction=pressure_solver_options()["edge_correction"])
     checked = 0
     if isinstance(control, Load) and not adhesive and periodic:
         before = problem.operator_applications
@@ -163,11 +162,9 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
         checked = problem.operator_applications - before   # the first step of a problem
     if precision == "mixed":
         with petsc_options(options):
-            coarse = PETSc.Options().getBool("petgap_coarse_start", True)
-            edge = PETSc.Options().getReal("petgap_edge_correction", EDGE_CORRECTION)
+            settings = pressure_solver_options()
         solution = solve_mixed(problem, control, tolerance=tolerance,
-                               max_iterations=max_iterations, monitor=monitor,
-                               coarse_start=coarse, edge_correction=edge,
+                               max_iterations=max_iterations, monitor=monitor, **settings,
                                initial_pressure=None if initial is None else initial.pressure)
     else:
         solution = _solve(problem, control, tao_type, adhesive, tolerance, max_iterations,

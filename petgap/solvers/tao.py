@@ -68,10 +68,7 @@ class _PetgapTao:
             self.solution = polonsky_keer(
                 self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
                 initial_pressure=None if self.initial is None else self.initial.pressure,
-                monitor=report,
-                coarse_start=PETSc.Options().getBool("petgap_coarse_start", True),
-                edge_correction=PETSc.Options().getReal("petgap_edge_correction",
-                                                        EDGE_CORRECTION))
+                monitor=report, **pressure_solver_options())
         else:
             self.solution = gap_cg(
                 self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
@@ -430,7 +427,7 @@ def solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial,
         # solve's (the half-space is shared)
         hard = problem.with_interaction(None)
         with petsc_options(options):
-            edge = PETSc.Options().getReal("petgap_edge_correction", EDGE_CORRECTION)
+            edge = pressure_solver_options()["edge_correction"]
         seed = polonsky_keer(hard, Load(max(target, 1e-3 * problem.pressure_scale)),
                              tolerance=max(tolerance, 1e-6), max_iterations=max_iterations,
                              edge_correction=edge)
@@ -570,6 +567,18 @@ class petsc_options:
             else:
                 db.setValue(key, old)
         return False
+
+
+def pressure_solver_options():
+    """petgap's own options of :func:`~petgap.solvers.pressure_cg.polonsky_keer`, as its keywords.
+
+    ``-petgap_coarse_start`` (default true) and ``-petgap_edge_correction``
+    (default :data:`~petgap.solvers.edge_correction.EDGE_CORRECTION`), read from
+    PETSc's database as it is: call it inside the solve's :class:`petsc_options`.
+    """
+    db = PETSc.Options()
+    return {"coarse_start": db.getBool("petgap_coarse_start", True),
+            "edge_correction": db.getReal("petgap_edge_correction", EDGE_CORRECTION)}
 
 
 # ------------------------------------------------------------- option checking

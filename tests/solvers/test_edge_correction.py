@@ -19,6 +19,7 @@ from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers.dispatch import solve
 from petgap.solvers.edge_correction import WINDOW, EdgeCorrection, kernel_window
+from petgap.solvers.mixed_precision import solve_mixed
 from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.surfaces.self_affine import self_affine
 from test_contact import E_STAR, assert_same_state, max_abs, tolerance_scales
@@ -173,6 +174,18 @@ def test_the_option_reaches_the_solver(comm):
                   options={"petgap_edge_correction": "0"})
     direct = polonsky_keer(problem, control, tolerance=1e-8, edge_correction=0.0)
     assert plain.iterations == direct.iterations != default.iterations
+
+
+def test_the_option_reaches_the_mixed_solve(comm):
+    """Both of its solves, the single one and the double refinement."""
+    problem = benchmark_problem(comm, n=128)
+    control = Load(0.002 * 0.1 * E_STAR)
+    default = solve(problem, control, tolerance=1e-8, precision="mixed")
+    plain = solve(problem, control, tolerance=1e-8, precision="mixed",
+                  options={"petgap_edge_correction": "0"})
+    direct = solve_mixed(problem, control, tolerance=1e-8, edge_correction=0.0)
+    assert plain.iterations == direct.iterations != default.iterations
+    assert plain.start == direct.start
 
 
 @pytest.mark.parametrize("theta", [-0.1, 1.0, float("nan")])
