@@ -36,7 +36,7 @@ to .npy, and solved
 Usage::
 
     python benchmarks/contact.py --sizes 512 1024 2048 --ranks 1 2 [--rounds 5] [--tamaas] [--no-coarse]
-        [--edge-correction THETA [THETA ...]]
+        [--edge-correction THETA [THETA ...]] [--interaction-block B [B ...]]
         [--protocol --work W] [--precision double single mixed]
 """
 import argparse
@@ -88,6 +88,8 @@ def worker(args):
         options["petgap_coarse_start"] = 0
     if args.edge_correction[0] is not None:   # a worker is given one value
         options["petgap_edge_correction"] = args.edge_correction[0]
+    if args.interaction_block[0] is not None:
+        options["petgap_interaction_block"] = args.interaction_block[0]
     if options:
         solver["petsc_options"] = options
     scene = Scene.from_dict({
@@ -227,6 +229,9 @@ def main():
                         help="shares of the contact-edge term taken off pcg-pressure's "
                              "preconditioner, a row each (0: the plain restricted stiffness; "
                              "default: petgap's)")
+    parser.add_argument("--interaction-block", type=int, nargs="+", default=[None],
+                        help="block sides of the patch interaction in pcg-pressure's "
+                             "preconditioner, a row each (0: without it; default: petgap's)")
     parser.add_argument("--protocol", action="store_true",
                         help="the paper's adhesive protocol: solve the non-adhesive load first, "
                              "then the adhesive problem (--work, --range) at its mean gap")
@@ -243,12 +248,14 @@ def main():
         for n in args.sizes:
             surface = Path(tmp) / f"h{n}.npy"
             tam = None
-            for ranks, precision, edge in itertools.product(args.ranks, args.precision,
-                                                            args.edge_correction):
+            for ranks, precision, edge, block in itertools.product(
+                    args.ranks, args.precision, args.edge_correction, args.interaction_block):
                 def arguments(work, mean_gap):
                     out = ["--no-coarse"] if args.no_coarse else []
                     if edge is not None:
                         out += ["--edge-correction", str(edge)]
+                    if block is not None:
+                        out += ["--interaction-block", str(block)]
                     out += ["--solver", args.solver, "--precision", precision,
                             "--tolerance", str(args.tolerance),
                            "--max-iterations", str(args.max_iterations), "--load", str(args.load),
@@ -309,7 +316,9 @@ def main():
                 if tam is not None and ranks == 1:
                     t_cols = [str(tam["iterations"]), f"{tam['time']:.2f}", f"{tam['kkt_gap']:.1e}",
                               f"{res['wall_time'] / tam['time']:.3f}"]
-                label = precision if edge is None else f"{precision}, edge correction {edge:g}"
+                label = ", ".join([precision]
+                                  + ([f"edge correction {edge:g}"] if edge is not None else [])
+                                  + ([f"interaction block {block}"] if block is not None else []))
                 print(f"| {n}^2 | {ranks} | {res['solver']} ({label}) | {res['iterations']} "
                       f"| {pairs:.2f} | "
                       f"{per_it:.4f} | {floor:.4f} | {ratio:.2f} | "

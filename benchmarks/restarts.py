@@ -4,14 +4,18 @@
 Not a test: it prints a markdown table for docs/benchmarks.md ("Restarts").  On the
 benchmark surface (H = 0.8, rms slope 0.1, lambda_min = 32 a0, lambda_max = L / 2,
 load 0.002 E*, KKT tolerance 1e-8) of each size and seed, ``pcg-pressure`` is solved from
-its coarse start with
+its coarse start, with the preconditioner without the patch interaction
+(``interaction_block = 0``) under
 
 * Polonsky and Keer's rule: conjugacy dropped whenever a point enters the contact set
   (``RESTART_FRACTION = 0``);
-* petgap's rule (:data:`petgap.solvers.pressure_cg.RESTART_FRACTION`);
+* the rule petgap keeps for that preconditioner
+  (:data:`petgap.solvers.pressure_cg.RESTART_FRACTION`);
 * conjugacy never dropped for entering points;
 
-each with the coarse grids 2x coarser per level (petgap's) and, with ``--factor 4``, 4x.
+and with petgap's preconditioner, the patch interaction in it, and Polonsky and
+Keer's rule (which petgap uses with it); each with the coarse grids 2x coarser
+per level (petgap's) and, with ``--factor 4``, 4x.
 A cell reads "fine iterations / operator applications of the fine solve (start s)".
 Iteration counts do not depend on the machine's load; the seconds do.
 
@@ -32,10 +36,11 @@ def main():
 
     import petgap
     from petgap.solvers import coarse, pressure_cg
+    from petgap.solvers.patch_interaction import BLOCK
 
     petgap_rule = pressure_cg.RESTART_FRACTION
-    rules = [("Polonsky-Keer", 0.0), (f"petgap ({petgap_rule:g})", petgap_rule),
-             ("never", float("inf"))]
+    rules = [("Polonsky-Keer", 0.0, 0), (f"{petgap_rule:g}", petgap_rule, 0),
+             ("never", float("inf"), 0), ("patch interaction, Polonsky-Keer", 0.0, BLOCK)]
     comm = None
     lines = []
     for n in args.sizes:
@@ -48,17 +53,18 @@ def main():
             for f in args.factor:
                 coarse.FACTOR = f
                 cells = []
-                for _, fraction in rules:
+                for _, fraction, block in rules:
                     pressure_cg.RESTART_FRACTION = fraction
                     started = time.perf_counter()
-                    s = pressure_cg.polonsky_keer(problem, petgap.Load(0.002), tolerance=1e-8)
+                    s = pressure_cg.polonsky_keer(problem, petgap.Load(0.002), tolerance=1e-8,
+                                                  interaction_block=block)
                     wall = time.perf_counter() - started
                     mark = "" if s.converged else f" ({s.reason})"
                     cells.append(f"{s.iterations} / {s.operator_applications} "
                                  f"({s.start_time:.1f} s of {wall:.1f} s){mark}")
                 lines.append(f"| {n}^2 | {seed} | {f} | " + " | ".join(cells) + " |")
     if comm.rank == 0:
-        print("| N | seed | coarsening | " + " | ".join(name for name, _ in rules) + " |")
+        print("| N | seed | coarsening | " + " | ".join(name for name, _, _ in rules) + " |")
         print("|---|---|---|" + "---|" * len(rules))
         print("\n".join(lines))
 

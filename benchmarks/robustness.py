@@ -16,17 +16,23 @@ It prints a markdown table per surface kind (converged solves, fine iterations
 in all, the largest count, the worst KKT residual, the largest difference in
 contact fraction between the two starts, the solves in which the
 preconditioner's contact-edge correction was dropped as not positive on the
-gap) and exits with status 1 if any solve did not converge.
+gap, and those in which its patch interaction was dropped, as not positive or
+because the residual rose) and exits with status 1 if any solve did not
+converge.
 ``--restart-fraction 0`` runs Polonsky and Keer's own restart rule (conjugacy
 dropped whenever a point enters the contact set) for comparison with petgap's
-(:data:`petgap.solvers.pressure_cg.RESTART_FRACTION`);
+(:data:`petgap.solvers.pressure_cg.RESTART_FRACTION`, the rule without the
+patch interaction);
 ``--edge-correction 0`` the plain restricted stiffness as the preconditioner
 (:data:`petgap.solvers.edge_correction.EDGE_CORRECTION` is petgap's share of
-the contact-edge term taken off it).
+the contact-edge term taken off it); ``--interaction-block 0`` the
+preconditioner without the patch interaction
+(:data:`petgap.solvers.patch_interaction.BLOCK` is petgap's block side).
 
 Usage (serially or under ``mpirun -n P``)::
 
-    python benchmarks/robustness.py [--restart-fraction F] [--edge-correction THETA] [--quick]
+    python benchmarks/robustness.py [--restart-fraction F] [--edge-correction THETA]
+        [--interaction-block B] [--quick]
 """
 import argparse
 import logging
@@ -46,14 +52,14 @@ def surfaces(quick):
 
 
 class DroppedCorrections(logging.Handler):
-    """Counts the solver's notices that it went on without the edge correction."""
+    """Counts the solver's notices that it went on without a term of its preconditioner."""
 
-    def __init__(self):
+    def __init__(self, term):
         super().__init__(logging.INFO)
-        self.count = 0
+        self.term, self.count = term, 0
 
     def emit(self, record):
-        self.count += "contact-edge correction" in record.msg
+        self.count += self.term in record.msg
 
 
 def main():
@@ -62,6 +68,8 @@ def main():
                         help="override petgap.solvers.pressure_cg.RESTART_FRACTION")
     parser.add_argument("--edge-correction", type=float, default=None,
                         help="override petgap.solvers.edge_correction.EDGE_CORRECTION")
+    parser.add_argument("--interaction-block", type=int, default=None,
+                        help="override petgap.solvers.patch_interaction.BLOCK (0: without)")
     parser.add_argument("--quick", action="store_true", help="one seed per surface kind")
     args = parser.parse_args()
 
@@ -69,11 +77,15 @@ def main():
     from petgap.solvers import pressure_cg
     from petgap.parallel.log import get_logger
     from petgap.solvers.edge_correction import EDGE_CORRECTION
+    from petgap.solvers.patch_interaction import BLOCK
 
     theta = EDGE_CORRECTION if args.edge_correction is None else args.edge_correction
-    dropped = DroppedCorrections()
+    block = BLOCK if args.interaction_block is None else args.interaction_block
+    dropped = DroppedCorrections("contact-edge correction")
+    dropped_far = DroppedCorrections("patch interaction")
     solver_log = get_logger("pressure_cg")
     solver_log.addHandler(dropped)
+    solver_log.addHandler(dropped_far)
     solver_log.setLevel(logging.INFO)
 
     if args.restart_fraction is not None:
@@ -83,7 +95,7 @@ def main():
     gaps = np.geomspace(2.0, 0.05, 5)
     rows, failures, started = [], 0, time.perf_counter()
     for name, n, hurst, lmin, seeds in surfaces(args.quick):
-        solves = converged = iterations = worst_its = drops = 0
+        solves = converged = iterations = worst_its = drops = far_drops = 0
         worst_kkt = worst_dc = 0.0
         for seed in seeds:
             grid = petgap.Grid((n, n), planner="estimate")
@@ -96,12 +108,14 @@ def main():
             for control in controls:
                 fractions = []
                 for coarse_start in (True, False):
-                    before = dropped.count
+                    before, far_before = dropped.count, dropped_far.count
                     s = pressure_cg.polonsky_keer(problem, control, tolerance=1e-8,
                                                   coarse_start=coarse_start,
-                                                  edge_correction=theta)
+                                                  edge_correction=theta,
+                                                  interaction_block=block)
                     solves += 1
                     drops += dropped.count > before
+                    far_drops += dropped_far.count > far_before
                     converged += bool(s.converged)
                     iterations += s.iterations
                     worst_its = max(worst_its, s.iterations)
@@ -114,19 +128,22 @@ def main():
                 worst_dc = max(worst_dc, abs(fractions[0] - fractions[1]))
         failures += solves - converged
         rows.append((name, len(seeds), solves, converged, iterations, worst_its, worst_kkt,
-                     worst_dc, drops))
+                     worst_dc, drops, far_drops))
     if comm.rank == 0:
         rule = pressure_cg.RESTART_FRACTION
-        print(f"restart fraction {rule:g}, edge correction {theta:g}, {comm.size} rank(s), "
+        print(f"restart fraction {rule:g} (without the patch interaction), edge correction "
+              f"{theta:g}, interaction block {block}, {comm.size} rank(s), "
               f"{time.perf_counter() - started:.0f} s\n")
         print("| surfaces | seeds | solves | converged | fine iterations | most | worst KKT "
-              "| largest c difference between starts | edge correction dropped |")
-        print("|---|---|---|---|---|---|---|---|---|")
+              "| largest c difference between starts | edge correction dropped "
+              "| patch interaction dropped |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
         for r in rows:
             print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]} | {r[4]} | {r[5]} | {r[6]:.1e} | "
-                  f"{r[7]:.1e} | {r[8]} |")
-        total = [sum(r[k] for r in rows) for k in (2, 3, 4, 8)]
-        print(f"| all | | {total[0]} | {total[1]} | {total[2]} | | | | {total[3]} |")
+                  f"{r[7]:.1e} | {r[8]} | {r[9]} |")
+        total = [sum(r[k] for r in rows) for k in (2, 3, 4, 8, 9)]
+        print(f"| all | | {total[0]} | {total[1]} | {total[2]} | | | | {total[3]} | "
+              f"{total[4]} |")
     sys.exit(1 if failures else 0)
 
 

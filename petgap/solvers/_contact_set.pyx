@@ -778,3 +778,73 @@ cdef object _edge_sums(real_t kind, object gS_, object kappa_, const index_t[::1
             skg += kg
             skgg += kg * <double>gS[k]
     return skg, skgg
+
+
+def block_sums(gS, kappa, const index_t[::1] idx, Py_ssize_t first_row, Py_ssize_t nx,
+               Py_ssize_t ny, Py_ssize_t mx, Py_ssize_t my, double[::1] w, double[::1] d):
+    """``w[b] += sum kappa g``, ``d[b] += sum kappa`` over the points of S in each block ``b``.
+
+    The ``(nx, ny)`` grid is cut into ``mx x my`` blocks: global row ``i`` falls
+    in block row ``i mx // nx``, column ``j`` in block column ``j my // ny``, and
+    block ``(I, J)`` is ``w[I my + J]``.  ``idx`` indexes this rank's unpadded
+    slab, whose first global row is ``first_row``.  Accumulated in double.
+    """
+    if _single("block_sums", "gS kappa", (gS, kappa)):
+        _block_sums[float](0, gS, kappa, idx, first_row, nx, ny, mx, my, w, d)
+    else:
+        _block_sums[double](0, gS, kappa, idx, first_row, nx, ny, mx, my, w, d)
+
+
+cdef object _block_sums(real_t kind, object gS_, object kappa_, const index_t[::1] idx,
+                        Py_ssize_t first_row, Py_ssize_t nx, Py_ssize_t ny, Py_ssize_t mx,
+                        Py_ssize_t my, double[::1] w, double[::1] d):
+    cdef const real_t[::1] gS = gS_
+    cdef const real_t[:, ::1] kappa = kappa_
+    cdef Py_ssize_t k, b, flat, ns = gS.shape[0]
+    cdef double kv
+    cdef const real_t *kf
+    if idx.shape[0] != ns:
+        raise ValueError("block_sums: gS and idx differ in length")
+    if w.shape[0] != mx * my or d.shape[0] != mx * my:
+        raise ValueError("block_sums: w and d must hold mx * my blocks")
+    if ns == 0:
+        return
+    kf = &kappa[0, 0]
+    with nogil:
+        for k in range(ns):
+            flat = idx[k]
+            b = ((flat // ny + first_row) * mx // nx) * my + (flat % ny) * my // ny
+            kv = <double>kf[flat]
+            w[b] += kv * <double>gS[k]
+            d[b] += kv
+
+
+def subtract_blocks(zS, kappa, const index_t[::1] idx, Py_ssize_t first_row, Py_ssize_t nx,
+                    Py_ssize_t ny, Py_ssize_t mx, Py_ssize_t my, const double[::1] y,
+                    double scale):
+    """``zS -= scale kappa y[b]`` on S, ``b`` each point's block as in :func:`block_sums`."""
+    if _single("subtract_blocks", "zS kappa", (zS, kappa)):
+        _subtract_blocks[float](0, zS, kappa, idx, first_row, nx, ny, mx, my, y, scale)
+    else:
+        _subtract_blocks[double](0, zS, kappa, idx, first_row, nx, ny, mx, my, y, scale)
+
+
+cdef object _subtract_blocks(real_t kind, object zS_, object kappa_, const index_t[::1] idx,
+                             Py_ssize_t first_row, Py_ssize_t nx, Py_ssize_t ny, Py_ssize_t mx,
+                             Py_ssize_t my, const double[::1] y, double scale):
+    cdef real_t[::1] zS = zS_
+    cdef const real_t[:, ::1] kappa = kappa_
+    cdef Py_ssize_t k, b, flat, ns = zS.shape[0]
+    cdef const real_t *kf
+    if idx.shape[0] != ns:
+        raise ValueError("subtract_blocks: zS and idx differ in length")
+    if y.shape[0] != mx * my:
+        raise ValueError("subtract_blocks: y must hold mx * my blocks")
+    if ns == 0:
+        return
+    kf = &kappa[0, 0]
+    with nogil:
+        for k in range(ns):
+            flat = idx[k]
+            b = ((flat // ny + first_row) * mx // nx) * my + (flat % ny) * my // ny
+            zS[k] = <real_t>(<double>zS[k] - scale * <double>kf[flat] * y[b])

@@ -23,6 +23,7 @@ from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers.convergence import Timer
 from petgap.solvers.edge_correction import EDGE_CORRECTION
+from petgap.solvers.patch_interaction import BLOCK
 from petgap.solvers.pressure_cg import polonsky_keer
 
 
@@ -46,7 +47,8 @@ def single_precision_twin(problem):
 
 
 def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monitor=None,
-                coarse_start=True, initial_pressure=None, edge_correction=EDGE_CORRECTION):
+                coarse_start=True, initial_pressure=None, edge_correction=EDGE_CORRECTION,
+                interaction_block=BLOCK):
     """Solve ``problem`` (double precision) under load or mean gap, first in single.
 
     The single-precision solve runs to ``max(tolerance, SINGLE_TOLERANCE_FLOOR)``
@@ -65,6 +67,7 @@ def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monit
     single = polonsky_keer(twin, control, tolerance=max(tolerance, SINGLE_TOLERANCE_FLOOR),
                            max_iterations=max_iterations, monitor=monitor,
                            coarse_start=coarse_start, edge_correction=edge_correction,
+                           interaction_block=interaction_block,
                            initial_pressure=None if initial_pressure is None
                            else initial_pressure.astype(np.float32))
     start_ops = single.operator_applications
@@ -76,7 +79,7 @@ def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monit
     double = polonsky_keer(problem, control, tolerance=tolerance,
                            max_iterations=max(max_iterations - single_iterations, 1),
                            initial_pressure=pressure, monitor=monitor,
-                           edge_correction=edge_correction)
+                           edge_correction=edge_correction, interaction_block=interaction_block)
     del pressure
     double.start = f"{description}; refined in double from its pressure"
     double.iterations += single_iterations

@@ -30,8 +30,20 @@ settled, see below).  The edge effects are the diagonal term ``kappa = K 1_S``
 that the zero extension of ``g`` across the contact edge adds to the stiffness;
 the preconditioner takes a share of it off,
 ``z = P_S K P_S g - theta kappa g`` (:mod:`petgap.solvers.edge_correction`,
-``edge_correction``), which lowers the edge eigenvalues and takes about a sixth
-of the iterations off.
+``edge_correction``), which lowers the edge eigenvalues.  What the local
+stiffness cannot see is the far field by which the contact patches press on
+each other: on a periodic cell the preconditioner also takes off a model of
+that interaction, solved on a grid of blocks of ``interaction_block`` pixels
+(:mod:`petgap.solvers.patch_interaction`), which keeps the preconditioned
+condition number near 2 on large grids instead of growing with the number of
+patches.  That term is smooth over whole blocks, and the projection onto
+``p >= 0`` that follows each step is not: while the contact set is still
+moving it shifts the pressure of many small patches at once, which the
+projection then clips, and on surfaces with patches of a few pixels the set
+can swing without converging.  So the term enters only in an iteration after
+one that changed at most :data:`SETTLED_FRACTION` of ``S``, and a solve whose
+residual rises above :data:`DIVERGENCE` times its lowest with the term in use
+goes on without it (logged); either switch restarts the conjugate gradients.
 
 Restarts (petgap's change to the method)
 ----------------------------------------
@@ -39,16 +51,20 @@ Polonsky and Keer restart the conjugate gradients whenever a point enters
 ``S``.  Past the first few iterations of a start from a coarser grid, a few
 points enter at almost every iteration -- the contact edges move by a pixel
 here and there -- so the method degrades to preconditioned steepest descent
-while the edges settle, the phase that dominates on large grids.  Here
+while the edges settle.  With the patch interaction in the preconditioner
+that is what works best: its steepest-descent steps are nearly Newton steps,
+and conjugacy kept across changes of ``S`` slows the final phase to the rate
+of a condition number several times the true one.  Without it (on a free
+boundary, or with ``interaction_block = 0``), steepest descent is slow, and
 conjugacy is kept unless more than :data:`RESTART_FRACTION` of ``S`` enters in
 one iteration: the few entering points perturb the subspace the directions
 were conjugate in, and the step's exact line search still minimises along
 the new direction.  A direction that is not a descent direction, ``(g, t) <=
 0``, is caught after its transform and replaced by the steepest one.  The
-fraction is a tuning constant: docs/benchmarks.md ("Restarts") has the
-iteration counts for it, its neighbours and Polonsky and Keer's rule, and
+rules are tuning choices: docs/benchmarks.md ("Restarts") has the iteration
+counts for both preconditioners under each rule, and
 ``benchmarks/robustness.py`` checks that every solve of the robustness set
-still converges.
+converges.
 
 When an iteration changes no point of the contact set (no projection, no
 point enters), ``K^{-1} p`` follows ``p`` by the conjugate-gradient recurrence
@@ -110,11 +126,19 @@ from petgap.solvers import coarse
 from petgap.solvers.contact_set import INDEX, ContactSet
 from petgap.solvers.convergence import Timer, judge
 from petgap.solvers.edge_correction import EDGE_CORRECTION, EdgeCorrection
+from petgap.solvers.patch_interaction import BLOCK, patch_interaction
 
-#: Conjugacy is dropped (a steepest-descent restart) when more points than this
-#: fraction of the contact set enter it in one iteration; see "Restarts" in the
-#: module docstring.  0 is Polonsky and Keer's own rule.
+#: Without the patch interaction in the preconditioner, conjugacy is dropped (a
+#: steepest-descent restart) when more points than this fraction of the contact
+#: set enter it in one iteration; with it, whenever a point enters (Polonsky and
+#: Keer's own rule, 0).  See "Restarts" in the module docstring.
 RESTART_FRACTION = 0.003
+#: The patch interaction enters the preconditioner only in an iteration after
+#: one that changed at most this fraction of the contact set (points clipped or
+#: entering), and leaves it for good if the residual rises above
+#: ``DIVERGENCE`` times its lowest; see "Preconditioning" in the module docstring.
+SETTLED_FRACTION = 0.01
+DIVERGENCE = 10.0
 #: A single-precision solve stops as ``"stalled_round_off"`` when its residual
 #: has not fallen below ``STALL_FACTOR`` times its best for ``STALL_ITERATIONS``
 #: iterations (see "Precision" in the module docstring).  Far from the floor
@@ -125,7 +149,7 @@ STALL_FACTOR = 0.9
 
 def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                   initial_pressure=None, monitor=None, preconditioned=True, coarse_start=True,
-                  edge_correction=EDGE_CORRECTION):
+                  edge_correction=EDGE_CORRECTION, interaction_block=BLOCK):
     """Solve non-adhesive contact under load or mean-gap control.
 
     Parameters
@@ -151,6 +175,11 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         The share ``theta`` of the contact-edge term taken off the
         preconditioner (:mod:`petgap.solvers.edge_correction`); 0 keeps the
         plain restricted stiffness.  Passed on to the coarse start.
+    interaction_block : int
+        Side in pixels of the blocks over which the preconditioner models the
+        elastic interaction between contact patches
+        (:mod:`petgap.solvers.patch_interaction`); 0 leaves it out.  Made only
+        with the edge correction, on periodic cells.  Passed on to the coarse start.
 
     Returns
     -------
@@ -162,6 +191,10 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     if not 0 <= edge_correction < 1:
         raise ValueError(f"edge_correction = {edge_correction} is not allowed: the share of "
                          f"the contact-edge term taken off the preconditioner is in [0, 1)")
+    if not (isinstance(interaction_block, (int, np.integer)) and interaction_block >= 0):
+        raise ValueError(f"interaction_block = {interaction_block!r} is not allowed: the side "
+                         f"of the patch interaction's blocks is a whole number of pixels >= 1, "
+                         f"or 0 to leave the interaction out")
     grid, comm = problem.grid, problem.grid.comm
     h = problem.topography
     dtype = h.dtype   # the grid's precision: every field and set vector in it, sums in double
@@ -201,7 +234,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     start = "warm" if initial_pressure is not None else ""
     if initial_pressure is None and coarse_start:
         initial_pressure, start = coarse_start_pressure(problem, control, tolerance, max_iterations,
-                                                        edge_correction)
+                                                        edge_correction, interaction_block)
     start_time = timer()
     if initial_pressure is None:
         start = "; ".join(filter(None, [
@@ -261,6 +294,10 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     best, best_it = np.inf, 0
     edge = (EdgeCorrection(half_space, mask, edge_correction)
             if preconditioned and edge_correction > 0 else None)
+    far = (patch_interaction(half_space, edge_correction, interaction_block)
+           if edge is not None else None)
+    settled = far_used = False   # S changed little in the last iteration; V y applied in it
+    lowest = np.inf
     if contact is None and not periodic:
         contact = ContactSet.everywhere(mask, padded_width, target, dtype=dtype)  # C P0 is not zero
     if contact is None:
@@ -315,6 +352,12 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         if verdict:
             converged, reason = verdict == "converged_kkt", verdict
             break
+        if far_used and residual > DIVERGENCE * lowest:
+            get_logger("pressure_cg").info(
+                "iteration %d: the residual rose to %.3g times its lowest with the patch "
+                "interaction in the preconditioner; going on without it", it, residual / lowest)
+            far, far_used, delta = None, False, 0.0   # a new preconditioner: restart
+        lowest = min(lowest, residual)
         if watch_stall:
             if residual < STALL_FACTOR * best:
                 best, best_it = residual, it
@@ -349,6 +392,25 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                 sum_z, kz, g_sq, sum_kg, sum_kgg = global_sums(
                     comm, *_cs.z_sums(zS, gS), g_norm, *edge.sums(gS, idx))
                 gz = kz - edge.theta * sum_kgg
+                use_far = gz > 0 and far is not None and settled
+                if use_far != far_used:
+                    delta = 0.0   # a new preconditioner: restart
+                far_used = False
+                if use_far:
+                    # less the patches' interaction V y, where still positive on the gap
+                    w, d = far.sums(gS, edge.kappa, idx)
+                    y = far.solve(w, d)
+                    far_gz, far_z = float(np.dot(w, y)), float(np.dot(d, y))
+                    if gz - far_gz > 0:
+                        far.subtract(zS, edge.kappa, idx, y)
+                        gz -= far_gz
+                        sum_z -= far_z
+                        far_used = True
+                    else:
+                        get_logger("pressure_cg").info(
+                            "iteration %d: the patch interaction of the preconditioner is not "
+                            "positive on the gap; going on without it", it)
+                        far, delta = None, 0.0   # a new preconditioner: restart
                 if gz > 0:
                     edge.subtract(zS, gS, idx)
                     sum_z -= edge.theta * sum_kg
@@ -356,7 +418,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                     get_logger("pressure_cg").info(
                         "iteration %d: the contact-edge correction of the preconditioner is "
                         "not positive on the gap; going on without it", it)
-                    edge, gz, delta = None, kz, 0.0   # a new preconditioner: restart
+                    edge, far, gz, delta = None, None, kz, 0.0   # a new preconditioner: restart
             zshift = sum_z / n_contact if load else 0.0
             # Pressure per unit penetration given to entering points (below):
             # plain Polonsky-Keer steps along the gap, so its step length tau
@@ -396,7 +458,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             added_p = np.empty(len(added), dtype=dtype)
             sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau * stiffness, added_p)
         n_overlap, n_clipped, sum_p = global_sums(comm, entering + len(added), clipped, sum_p)
-        delta = 0.0 if n_overlap > RESTART_FRACTION * n_contact else 1.0
+        delta = 0.0 if n_overlap > (RESTART_FRACTION if far is None else 0) * n_contact else 1.0
+        settled = n_overlap + n_clipped <= SETTLED_FRACTION * n_contact
         scale = target * n / sum_p if load else 1.0
         if clipped or len(added):
             del idx, pidx, pS, tS, gS  # views of buffers merge may replace
@@ -408,7 +471,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             _cs.recurrence(u, padded, tau, scale, ny)
             contact.p[...] *= scale
             scale = 1.0
-    edge = None   # kappa and its mask: freed before the result's fields are made
+    edge = far = None   # kappa and its mask: freed before the result's fields are made
 
     # Residuals are taken on the gap as computed; the stored field (and the
     # scalars derived from it) is its projection onto the contact state found:
@@ -481,7 +544,7 @@ def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, 
 
 
 def coarse_start_pressure(problem, control, tolerance, max_iterations,
-                          edge_correction=EDGE_CORRECTION):
+                          edge_correction=EDGE_CORRECTION, interaction_block=BLOCK):
     """A fine-grid pressure to start from: the solution on a coarser grid, prolonged.
 
     The coarse problem and the transfers are :mod:`petgap.solvers.coarse`'s;
@@ -494,7 +557,8 @@ def coarse_start_pressure(problem, control, tolerance, max_iterations,
         return None, ""
     solution = polonsky_keer(coarse_problem, control,
                              tolerance=max(tolerance, coarse.COARSE_TOLERANCE),
-                             max_iterations=max_iterations, edge_correction=edge_correction)
+                             max_iterations=max_iterations, edge_correction=edge_correction,
+                             interaction_block=interaction_block)
     pressure = solution.pressure
     finite = problem.grid.comm.allreduce(bool(np.isfinite(pressure).all()), op=MPI.LAND)
     cgrid = coarse_problem.grid

@@ -28,6 +28,7 @@ from petsc4py import PETSc
 from petgap.mechanics.problem import Load, MeanGap
 from petgap.solvers.convergence import Timer
 from petgap.solvers.edge_correction import EDGE_CORRECTION
+from petgap.solvers.patch_interaction import BLOCK
 from petgap.solvers.gap_cg import gap_cg
 from petgap.solvers.pressure_cg import polonsky_keer
 
@@ -427,10 +428,11 @@ def solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial,
         # solve's (the half-space is shared)
         hard = problem.with_interaction(None)
         with petsc_options(options):
-            edge = pressure_solver_options()["edge_correction"]
+            settings = pressure_solver_options()
         seed = polonsky_keer(hard, Load(max(target, 1e-3 * problem.pressure_scale)),
                              tolerance=max(tolerance, 1e-6), max_iterations=max_iterations,
-                             edge_correction=edge)
+                             edge_correction=settings["edge_correction"],
+                             interaction_block=settings["interaction_block"])
         iterations += seed.iterations
         gap_guess, state = seed.mean_gap, seed
     points, history = [], []
@@ -572,13 +574,17 @@ class petsc_options:
 def pressure_solver_options():
     """petgap's own options of :func:`~petgap.solvers.pressure_cg.polonsky_keer`, as its keywords.
 
-    ``-petgap_coarse_start`` (default true) and ``-petgap_edge_correction``
-    (default :data:`~petgap.solvers.edge_correction.EDGE_CORRECTION`), read from
-    PETSc's database as it is: call it inside the solve's :class:`petsc_options`.
+    ``-petgap_coarse_start`` (default true), ``-petgap_edge_correction``
+    (default :data:`~petgap.solvers.edge_correction.EDGE_CORRECTION`) and
+    ``-petgap_interaction_block`` (default
+    :data:`~petgap.solvers.patch_interaction.BLOCK`, 0 leaves the patch
+    interaction out), read from PETSc's database as it is: call it inside the
+    solve's :class:`petsc_options`.
     """
     db = PETSc.Options()
     return {"coarse_start": db.getBool("petgap_coarse_start", True),
-            "edge_correction": db.getReal("petgap_edge_correction", EDGE_CORRECTION)}
+            "edge_correction": db.getReal("petgap_edge_correction", EDGE_CORRECTION),
+            "interaction_block": db.getInt("petgap_interaction_block", BLOCK)}
 
 
 # ------------------------------------------------------------- option checking
@@ -605,6 +611,7 @@ KNOWN_OPTIONS = {
     "tao_ls_type": "word",
     # petgap's own
     "petgap_coarse_start": "bool", "petgap_edge_correction": "real",
+    "petgap_interaction_block": "int",
     # PETSc at large (profiling, debugging), read at initialisation or finalisation
     "log_view": "viewer", "log_view_memory": "bool", "log_all": "bool", "log_trace": "viewer",
     "log_exclude": "word", "options_left": "bool", "options_view": "viewer",

@@ -1,0 +1,225 @@
+"""The patch interaction of the pressure solver's preconditioner (petgap.solvers.patch_interaction).
+
+The block sums and the subtraction are checked against NumPy on the gathered
+fields, on a grid whose blocks do not divide it evenly and whose slab boundary
+cuts through a block under ``mpirun -n 2``; the coarse solve against a dense
+solve of ``(F^{-1} + D) y = w`` built from the compliance's symbol; the solver
+with the interaction must reach the state it reaches without, in fewer
+iterations, on any number of ranks, and go on without the term where it is not
+positive.
+"""
+import logging
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from petgap.mechanics.half_space import ElasticHalfSpace
+from petgap.mechanics.problem import ContactProblem, Load, MeanGap
+from petgap.parallel.grid import Grid
+from petgap.solvers import _contact_set as _cs
+from petgap.solvers.dispatch import solve
+from petgap.solvers.mixed_precision import solve_mixed
+from petgap.solvers.patch_interaction import PatchInteraction, blocks, patch_interaction
+from petgap.solvers import pressure_cg
+from petgap.solvers.pressure_cg import polonsky_keer
+from petgap.surfaces.self_affine import self_affine
+from test_contact import E_STAR, assert_same_state, max_abs, tolerance_scales
+
+SIZE = (3.0, 2.0)   # rectangular pixels
+
+
+def block_of(shape, m):
+    """Each point's block ``(I, J)`` as a flat index ``I my + J``, by NumPy."""
+    (nx, ny), (mx, my) = shape, m
+    rows = np.arange(nx) * mx // nx
+    cols = np.arange(ny) * my // ny
+    return rows[:, None] * my + cols[None, :]
+
+
+def gathered_set(grid, full_mask):
+    """This rank's indices of the mask's points (into its unpadded slab)."""
+    return np.flatnonzero(grid.local_part(full_mask)).astype(np.int32)
+
+
+@pytest.mark.parametrize("precision, tol", [("double", 1e-13), ("single", 1e-6)])
+def test_block_sums_and_subtraction(comm, precision, tol):
+    shape = (70, 45)   # blocks of 8: 8 x 5 blocks of 8-9 rows and 9 columns
+    grid = Grid(shape, size=SIZE, comm=comm, planner="estimate", precision=precision)
+    rng = np.random.default_rng(7)
+    full_mask = rng.random(shape) < 0.3
+    full_kappa = rng.random(shape) + 0.5
+    full_g = rng.standard_normal(shape)
+    full_z = rng.standard_normal(shape)
+    far = PatchInteraction(grid, E_STAR, theta=0.6, block=8)
+    assert (far.mx, far.my) == (8, 5)
+    idx = gathered_set(grid, full_mask)
+    dtype = grid.dtype
+    kappa = grid.local_part(full_kappa).astype(dtype)
+    gS = grid.local_part(full_g).ravel()[idx].astype(dtype)
+    w, d = far.sums(gS, kappa, idx)
+    b = block_of(shape, (8, 5))
+    expected_w = 0.4 * np.bincount(b[full_mask], (full_kappa * full_g)[full_mask], minlength=40)
+    expected_d = 0.4 * np.bincount(b[full_mask], full_kappa[full_mask], minlength=40)
+    assert np.abs(w - expected_w).max() <= tol * np.abs(expected_w).max()
+    assert np.abs(d - expected_d).max() <= tol * expected_d.max()
+
+    y = rng.standard_normal(40)
+    zS = grid.local_part(full_z).ravel()[idx].astype(dtype)
+    far.subtract(zS, kappa, idx, y)
+    expected = full_z - 0.4 * full_kappa * y[b]
+    assert max_abs(grid, zS - grid.local_part(expected).ravel()[idx]) <= tol * 10
+
+
+def test_the_kernels_refuse_mixed_precisions():
+    idx = np.arange(3, dtype=np.int32)
+    with pytest.raises(TypeError, match=r"block_sums: .*gS float32, kappa float64"):
+        _cs.block_sums(np.zeros(3, np.float32), np.zeros((1, 3)), idx, 0, 1, 3, 1, 1,
+                       np.zeros(1), np.zeros(1))
+
+
+def dense_compliance(m, size, modulus, cell):
+    """The coarse compliance ``F`` as a dense matrix, column by column from its symbol."""
+    mx, my = m
+    qx = 2 * np.pi * np.fft.fftfreq(mx, d=size[0] / mx)
+    qy = 2 * np.pi * np.fft.fftfreq(my, d=size[1] / my)
+    q = np.hypot(qx[:, None], qy[None, :])
+    symbol = np.where(q > 0, 2 / (modulus * np.where(q > 0, q, 1) * cell), 0.0)
+    columns = []
+    for k in range(mx * my):
+        e = np.zeros(mx * my)
+        e[k] = 1
+        columns.append(np.fft.ifft2(np.fft.fft2(e.reshape(m)) * symbol).real.ravel())
+    return np.array(columns).T
+
+
+def test_the_coarse_solve_is_the_woodbury_middle(comm):
+    """``y = F (I + D F)^{-1} w``, i.e. ``(F^{-1} + D) y = w`` off F's null space."""
+    grid = Grid((96, 60), size=SIZE, comm=comm, planner="estimate")
+    far = PatchInteraction(grid, E_STAR, theta=0.6, block=12)
+    m = (far.mx, far.my)
+    assert m == (8, 5)
+    rng = np.random.default_rng(11)
+    w, d = rng.standard_normal(40), rng.random(40) * 50
+    f = dense_compliance(m, SIZE, E_STAR, cell=(96 / 8) * (60 / 5))
+    expected = f @ np.linalg.solve(np.eye(40) + np.diag(d) @ f, w)
+    y = far.solve(w, d)
+    assert np.abs(y - expected).max() <= 1e-8 * np.abs(expected).max()
+    assert far.inner_iterations > 0
+
+
+def test_no_interaction_where_it_does_not_apply(comm):
+    small = Grid((100, 300), comm=comm, planner="estimate")
+    assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6) is None  # 3 blocks a side
+    assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=25) is not None
+    assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=0) is None
+    assert blocks(100000) == 256
+
+
+def benchmark_problem(comm, n=256, seed=1):
+    grid = Grid((n, n), comm=comm, planner="estimate")
+    h = self_affine(grid, 0.8, 32.0, n / 2, rms_slope=0.1, seed=seed)
+    return ContactProblem(grid, h, ElasticHalfSpace(grid, E_STAR))
+
+
+@pytest.mark.parametrize("control", ["load", "mean-gap"])
+def test_the_interaction_reaches_the_same_state_sooner(comm, control):
+    """Fewer iterations on a grid of 512^2 (16 blocks a side), the same state."""
+    problem = benchmark_problem(comm, n=512)
+    control = (Load(0.002 * 0.1 * E_STAR) if control == "load"
+               else MeanGap(0.5 * problem.rms_height))
+    tol = 1e-9
+    local = polonsky_keer(problem, control, tolerance=tol, interaction_block=0)
+    far = polonsky_keer(problem, control, tolerance=tol)
+    assert local.converged and far.converged
+    assert far.iterations < local.iterations
+    comm = problem.grid.comm
+    differ = comm.allreduce(int(np.count_nonzero((local.pressure > 0) ^ (far.pressure > 0))))
+    assert differ <= 1e-3 * comm.allreduce(int(np.count_nonzero(local.pressure > 0)))
+    assert_same_state(problem.grid, local, far, *tolerance_scales(problem, tol))
+
+
+def test_the_interaction_does_not_depend_on_the_ranks(comm):
+    """Decompositions only reorder sums: agreement to 1e-12 of the natural scales."""
+    serial, problem = benchmark_problem(MPI.COMM_SELF), benchmark_problem(comm)
+    control = Load(0.002 * 0.1 * E_STAR)
+    one = polonsky_keer(serial, control, tolerance=1e-10)
+    many = polonsky_keer(problem, control, tolerance=1e-10)
+    assert one.converged and many.converged
+    assert many.iterations == one.iterations
+    grid = problem.grid
+    assert max_abs(grid, many.gap - one.gap[grid.x_slice]) <= 1e-12 * problem.gap_scale
+    assert (max_abs(grid, many.pressure - one.pressure[grid.x_slice])
+            <= 1e-12 * problem.pressure_scale)
+
+
+def test_the_option_reaches_the_solvers(comm):
+    problem = benchmark_problem(comm, n=256)
+    control = Load(0.002 * 0.1 * E_STAR)
+    default = solve(problem, control, solver="pcg-pressure", tolerance=1e-8)
+    off = solve(problem, control, solver="pcg-pressure", tolerance=1e-8,
+                options={"petgap_interaction_block": "0"})
+    direct = polonsky_keer(problem, control, tolerance=1e-8, interaction_block=0)
+    assert list(off.history) == list(direct.history) != list(default.history)
+    mixed = solve(problem, control, tolerance=1e-8, precision="mixed",
+                  options={"petgap_interaction_block": "0"})
+    mixed_direct = solve_mixed(problem, control, tolerance=1e-8, interaction_block=0)
+    assert mixed.start == mixed_direct.start
+    assert list(mixed.history) == list(mixed_direct.history)
+
+
+@pytest.mark.parametrize("block", [-1, 2.5])
+def test_a_block_that_is_not_a_whole_number_is_refused(comm, block):
+    problem = benchmark_problem(comm, n=64)
+    with pytest.raises(ValueError, match=rf"interaction_block = {block} is not allowed"):
+        polonsky_keer(problem, Load(0.001), interaction_block=block)
+
+
+def test_an_interaction_that_is_not_positive_is_dropped(comm, monkeypatch):
+    """Made to look too large on the gap, the term is never applied: the solve without it."""
+    problem = benchmark_problem(comm, n=256)
+    control = Load(0.002 * 0.1 * E_STAR)
+    original = PatchInteraction.solve
+    monkeypatch.setattr(PatchInteraction, "solve",
+                        lambda self, w, d: 1e6 * original(self, w, d))
+    records = []
+    handler = logging.Handler()
+    handler.emit = records.append
+    logger = logging.getLogger("petgap")
+    level = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    try:
+        dropped = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False)
+        local = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False,
+                              interaction_block=0)
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+    assert dropped.converged
+    assert sum("patch interaction" in r.getMessage() for r in records) == 1
+    assert_same_state(problem.grid, local, dropped, *tolerance_scales(problem, 1e-9))
+
+
+def test_a_rising_residual_drops_the_interaction(comm, monkeypatch):
+    """Dropped at the first iteration it was used in, the solve converges without it."""
+    problem = benchmark_problem(comm, n=256)
+    control = Load(0.002 * 0.1 * E_STAR)
+    monkeypatch.setattr(pressure_cg, "DIVERGENCE", 0.0)   # every residual "rose"
+    records = []
+    handler = logging.Handler()
+    handler.emit = records.append
+    logger = logging.getLogger("petgap")
+    level = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    try:
+        dropped = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False)
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+    local = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False,
+                          interaction_block=0)
+    assert dropped.converged
+    assert sum("rose to" in r.getMessage() for r in records) == 1
+    assert_same_state(problem.grid, local, dropped, *tolerance_scales(problem, 1e-9))
