@@ -34,8 +34,8 @@ symmetric, and positive wherever the model is fair (the caller checks
 ``(g, z) > 0`` and otherwise goes on without it).  ``y`` is found on the coarse
 grid as ``F^{1/2} (I + F^{1/2} D F^{1/2})^{-1} F^{1/2} V^T g`` by conjugate
 gradients (``F^{1/2}`` has no mean mode, as ``F`` has none), to a relative
-residual of :data:`INNER_TOLERANCE`, so that the preconditioner is the same
-linear operator at every iteration; the coarse grid is replicated on every rank,
+residual of :data:`INNER_TOLERANCE`, which keeps the preconditioner the same
+linear operator at every iteration to within a millionth; the coarse grid is replicated on every rank,
 which receive the same block sums and so compute the same ``y``.  On the
 benchmark surface it takes the condition number with a fixed contact set to
 about 2.3 at 1024^2 and 4096^2 (``benchmarks/patch_spectrum.py``).
@@ -61,10 +61,14 @@ BLOCK = 32
 #: The coarse grid has at most this many blocks a side (larger blocks beyond).
 MAX_SIDE = 256
 #: Fewest blocks a side for the correction to be made at all: with fewer the
-#: cell has no wavelengths long enough beside a block for the far field to matter.
-MIN_SIDE = 4
-#: Relative residual to which the coarse system is solved.
-INNER_TOLERANCE = 1e-10
+#: cell's longest wavelengths are too few patches long for their far field to
+#: matter beside the cost of the coarse solve (grids below 512^2 with 32-pixel
+#: blocks, among them the coarse start's levels below that).
+MIN_SIDE = 16
+#: Relative residual to which the coarse system is solved.  The term is then
+#: off by that share of itself, far below what one outer iteration gains (a
+#: factor of about 0.2), so the conjugate gradients see a fixed operator.
+INNER_TOLERANCE = 1e-6
 
 
 def blocks(n, block=BLOCK):

@@ -20,7 +20,8 @@ from petgap.parallel.grid import Grid
 from petgap.solvers import _contact_set as _cs
 from petgap.solvers.dispatch import solve
 from petgap.solvers.mixed_precision import solve_mixed
-from petgap.solvers.patch_interaction import PatchInteraction, blocks, patch_interaction
+from petgap.solvers.patch_interaction import (MIN_SIDE, PatchInteraction, blocks,
+                                              patch_interaction)
 from petgap.solvers import pressure_cg
 from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.surfaces.self_affine import self_affine
@@ -104,19 +105,20 @@ def test_the_coarse_solve_is_the_woodbury_middle(comm):
     f = dense_compliance(m, SIZE, E_STAR, cell=(96 / 8) * (60 / 5))
     expected = f @ np.linalg.solve(np.eye(40) + np.diag(d) @ f, w)
     y = far.solve(w, d)
-    assert np.abs(y - expected).max() <= 1e-8 * np.abs(expected).max()
+    assert np.abs(y - expected).max() <= 1e-5 * np.abs(expected).max()   # INNER_TOLERANCE 1e-6
     assert far.inner_iterations > 0
 
 
 def test_no_interaction_where_it_does_not_apply(comm):
-    small = Grid((100, 300), comm=comm, planner="estimate")
-    assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6) is None  # 3 blocks a side
-    assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=25) is not None
+    small = Grid((480, 600), comm=comm, planner="estimate")
+    assert MIN_SIDE * 32 > 480
+    assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6) is None  # 15 blocks a side
+    assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=30) is not None
     assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=0) is None
     assert blocks(100000) == 256
 
 
-def benchmark_problem(comm, n=256, seed=1):
+def benchmark_problem(comm, n=512, seed=1):
     grid = Grid((n, n), comm=comm, planner="estimate")
     h = self_affine(grid, 0.8, 32.0, n / 2, rms_slope=0.1, seed=seed)
     return ContactProblem(grid, h, ElasticHalfSpace(grid, E_STAR))
@@ -125,7 +127,7 @@ def benchmark_problem(comm, n=256, seed=1):
 @pytest.mark.parametrize("control", ["load", "mean-gap"])
 def test_the_interaction_reaches_the_same_state_sooner(comm, control):
     """Fewer iterations on a grid of 512^2 (16 blocks a side), the same state."""
-    problem = benchmark_problem(comm, n=512)
+    problem = benchmark_problem(comm)
     control = (Load(0.002 * 0.1 * E_STAR) if control == "load"
                else MeanGap(0.5 * problem.rms_height))
     tol = 1e-9
@@ -154,7 +156,7 @@ def test_the_interaction_does_not_depend_on_the_ranks(comm):
 
 
 def test_the_option_reaches_the_solvers(comm):
-    problem = benchmark_problem(comm, n=256)
+    problem = benchmark_problem(comm)
     control = Load(0.002 * 0.1 * E_STAR)
     default = solve(problem, control, solver="pcg-pressure", tolerance=1e-8)
     off = solve(problem, control, solver="pcg-pressure", tolerance=1e-8,
@@ -177,7 +179,7 @@ def test_a_block_that_is_not_a_whole_number_is_refused(comm, block):
 
 def test_an_interaction_that_is_not_positive_is_dropped(comm, monkeypatch):
     """Made to look too large on the gap, the term is never applied: the solve without it."""
-    problem = benchmark_problem(comm, n=256)
+    problem = benchmark_problem(comm)
     control = Load(0.002 * 0.1 * E_STAR)
     original = PatchInteraction.solve
     monkeypatch.setattr(PatchInteraction, "solve",
@@ -203,7 +205,7 @@ def test_an_interaction_that_is_not_positive_is_dropped(comm, monkeypatch):
 
 def test_a_rising_residual_drops_the_interaction(comm, monkeypatch):
     """Dropped at the first iteration it was used in, the solve converges without it."""
-    problem = benchmark_problem(comm, n=256)
+    problem = benchmark_problem(comm)
     control = Load(0.002 * 0.1 * E_STAR)
     monkeypatch.setattr(pressure_cg, "DIVERGENCE", 0.0)   # every residual "rose"
     records = []
