@@ -37,13 +37,16 @@ gradients (``F^{1/2}`` has no mean mode, as ``F`` has none), to a relative
 residual of :data:`INNER_TOLERANCE`, which keeps the preconditioner the same
 linear operator at every iteration to within a millionth; the coarse grid is replicated on every rank,
 which receive the same block sums and so compute the same ``y``.  On the
-benchmark surface it takes the condition number with a fixed contact set to
-about 2.3 at 1024^2 and 4096^2 (``benchmarks/patch_spectrum.py``).
+benchmark surface it takes the condition number with a fixed contact set
+from 5.7 to 2.6 at 2048^2 and from 8.6 to 2.5 at 4096^2
+(``benchmarks/patch_spectrum.py``).
 
 The term is smooth over whole blocks, and the solver's projection onto ``p >=
 0`` is not: :func:`~petgap.solvers.pressure_cg.polonsky_keer` applies it only
 once the contact set has nearly stopped changing, and drops it if the residual
 rises (its module docstring says why).
+
+The solver makes it under load control only (its module docstring says why).
 
 Cost: one pass over ``S`` for the block sums, one to subtract ``V y``, an
 all-reduce of two coarse fields, and a few dozen transforms of the coarse grid

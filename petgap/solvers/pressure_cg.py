@@ -35,8 +35,11 @@ stiffness cannot see is the far field by which the contact patches press on
 each other: on a periodic cell the preconditioner also takes off a model of
 that interaction, solved on a grid of blocks of ``interaction_block`` pixels
 (:mod:`petgap.solvers.patch_interaction`), which keeps the preconditioned
-condition number near 2 on large grids instead of growing with the number of
-patches.  That term is smooth over whole blocks, and the projection onto
+condition number near 2.5 on large grids instead of growing with the number of
+patches.  It does so under load control; under mean-gap control, at contact
+fractions beyond a half, it took more iterations than it saved
+(docs/benchmarks.md, "The preconditioner's patch interaction"), and there it
+is not made.  That term is smooth over whole blocks, and the projection onto
 ``p >= 0`` that follows each step is not: while the contact set is still
 moving it shifts the pressure of many small patches at once, which the
 projection then clips, and on surfaces with patches of a few pixels the set
@@ -51,10 +54,11 @@ Polonsky and Keer restart the conjugate gradients whenever a point enters
 ``S``.  Past the first few iterations of a start from a coarser grid, a few
 points enter at almost every iteration -- the contact edges move by a pixel
 here and there -- so the method degrades to preconditioned steepest descent
-while the edges settle.  With the patch interaction in the preconditioner
-that is what works best: its steepest-descent steps are nearly Newton steps,
-and conjugacy kept across changes of ``S`` slows the final phase to the rate
-of a condition number several times the true one.  Without it (on a free
+while the edges settle.  In an iteration with the patch interaction in the
+preconditioner that is what works best: its steepest-descent steps are
+nearly Newton steps, and conjugacy kept across changes of ``S`` slows the
+final phase to the rate of a condition number several times the true one.
+Without it (before the set has settled, under mean-gap control, on a free
 boundary, or with ``interaction_block = 0``), steepest descent is slow, and
 conjugacy is kept unless more than :data:`RESTART_FRACTION` of ``S`` enters in
 one iteration: the few entering points perturb the subspace the directions
@@ -128,10 +132,10 @@ from petgap.solvers.convergence import Timer, judge
 from petgap.solvers.edge_correction import EDGE_CORRECTION, EdgeCorrection
 from petgap.solvers.patch_interaction import BLOCK, patch_interaction
 
-#: Without the patch interaction in the preconditioner, conjugacy is dropped (a
-#: steepest-descent restart) when more points than this fraction of the contact
-#: set enter it in one iteration; with it, whenever a point enters (Polonsky and
-#: Keer's own rule, 0).  See "Restarts" in the module docstring.
+#: In an iteration without the patch interaction in the preconditioner,
+#: conjugacy is dropped (a steepest-descent restart) when more points than this
+#: fraction of the contact set enter it; in one with it, whenever a point enters
+#: (Polonsky and Keer's own rule, 0).  See "Restarts" in the module docstring.
 RESTART_FRACTION = 0.003
 #: The patch interaction enters the preconditioner only in an iteration after
 #: one that changed at most this fraction of the contact set (points clipped or
@@ -179,7 +183,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         Side in pixels of the blocks over which the preconditioner models the
         elastic interaction between contact patches
         (:mod:`petgap.solvers.patch_interaction`); 0 leaves it out.  Made only
-        with the edge correction, on periodic cells.  Passed on to the coarse start.
+        with the edge correction, under load control on periodic cells.  Passed
+        on to the coarse start.
 
     Returns
     -------
@@ -295,7 +300,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     edge = (EdgeCorrection(half_space, mask, edge_correction)
             if preconditioned and edge_correction > 0 else None)
     far = (patch_interaction(half_space, edge_correction, interaction_block)
-           if edge is not None else None)
+           if edge is not None and load else None)
     settled = far_used = False   # S changed little in the last iteration; V y applied in it
     lowest = np.inf
     if contact is None and not periodic:
@@ -458,7 +463,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             added_p = np.empty(len(added), dtype=dtype)
             sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau * stiffness, added_p)
         n_overlap, n_clipped, sum_p = global_sums(comm, entering + len(added), clipped, sum_p)
-        delta = 0.0 if n_overlap > (RESTART_FRACTION if far is None else 0) * n_contact else 1.0
+        delta = 0.0 if n_overlap > (0 if far_used else RESTART_FRACTION) * n_contact else 1.0
         settled = n_overlap + n_clipped <= SETTLED_FRACTION * n_contact
         scale = target * n / sum_p if load else 1.0
         if clipped or len(added):
