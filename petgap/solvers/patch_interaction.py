@@ -65,9 +65,10 @@ BLOCK = 32
 MAX_SIDE = 256
 #: Fewest blocks a side for the correction to be made at all: with fewer the
 #: cell's longest wavelengths are too few patches long for their far field to
-#: matter beside the cost of the coarse solve (grids below 512^2 with 32-pixel
-#: blocks, among them the coarse start's levels below that).
-MIN_SIDE = 16
+#: matter beside the cost of the coarse solve (grids below 1024^2 with 32-pixel
+#: blocks, among them the coarse start's levels below that: at 512^2 it saved
+#: 2 of 13 iterations and cost more time than that, docs/benchmarks.md).
+MIN_SIDE = 32
 #: Relative residual to which the coarse system is solved.  The term is then
 #: off by that share of itself, far below what one outer iteration gains (a
 #: factor of about 0.2), so the conjugate gradients see a fixed operator.

@@ -110,22 +110,22 @@ def test_the_coarse_solve_is_the_woodbury_middle(comm):
 
 
 def test_no_interaction_where_it_does_not_apply(comm):
-    small = Grid((480, 600), comm=comm, planner="estimate")
-    assert MIN_SIDE * 32 > 480
-    assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6) is None  # 15 blocks a side
+    small = Grid((960, 1200), comm=comm, planner="estimate")
+    assert MIN_SIDE * 32 > 960
+    assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6) is None  # 30 blocks a side
     assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=30) is not None
     assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=0) is None
     assert blocks(100000) == 256
 
 
-def benchmark_problem(comm, n=512, seed=1):
+def benchmark_problem(comm, n=1024, seed=1):
     grid = Grid((n, n), comm=comm, planner="estimate")
     h = self_affine(grid, 0.8, 32.0, n / 2, rms_slope=0.1, seed=seed)
     return ContactProblem(grid, h, ElasticHalfSpace(grid, E_STAR))
 
 
 def test_the_interaction_reaches_the_same_state_sooner(comm):
-    """Fewer iterations on a grid of 512^2 (16 blocks a side), the same state."""
+    """Fewer iterations on a grid of 1024^2 (32 blocks a side), the same state."""
     problem = benchmark_problem(comm)
     control = Load(0.002 * 0.1 * E_STAR)
     tol = 1e-9
