@@ -13,9 +13,10 @@ its coarse start, with the preconditioner without the patch interaction
   (:data:`petgap.solvers.pressure_cg.RESTART_FRACTION`);
 * conjugacy never dropped for entering points;
 
-and with petgap's preconditioner, the patch interaction in it, and Polonsky and
-Keer's rule (which petgap uses with it); each with the coarse grids 2x coarser
-per level (petgap's) and, with ``--factor 4``, 4x.
+and petgap's solver: the patch interaction in the preconditioner once the set
+has settled, Polonsky and Keer's rule in the iterations that apply it and
+``RESTART_FRACTION`` in the others; each with the coarse grids 2x coarser per
+level (petgap's) and, with ``--factor 4``, 4x.
 A cell reads "fine iterations / operator applications of the fine solve (start s)".
 Iteration counts do not depend on the machine's load; the seconds do.
 
@@ -40,7 +41,7 @@ def main():
 
     petgap_rule = pressure_cg.RESTART_FRACTION
     rules = [("Polonsky-Keer", 0.0, 0), (f"{petgap_rule:g}", petgap_rule, 0),
-             ("never", float("inf"), 0), ("patch interaction, Polonsky-Keer", 0.0, BLOCK)]
+             ("never", float("inf"), 0), ("petgap (patch interaction)", petgap_rule, BLOCK)]
     comm = None
     lines = []
     for n in args.sizes:

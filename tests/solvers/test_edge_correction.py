@@ -8,6 +8,7 @@ correction must reach the state the plain preconditioner reaches, in fewer
 iterations, and fall back to the plain preconditioner where the correction is
 not positive.
 """
+import contextlib
 import logging
 
 import numpy as np
@@ -143,6 +144,27 @@ def test_the_correction_is_theta_kappa_g(comm):
     assert abs(sums[1] - np.dot(kappa.ravel()[idx], g * g)) <= 1e-12 * scale
 
 
+@contextlib.contextmanager
+def solver_notices():
+    """The records petgap's logger emits inside the block, at level INFO and up.
+
+    Taken on petgap's own logger: once set up for a run it does not propagate
+    to pytest's.
+    """
+    records = []
+    handler = logging.Handler()
+    handler.emit = records.append
+    logger = logging.getLogger("petgap")
+    level = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    try:
+        yield records
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
 def benchmark_problem(comm, n=256, seed=1):
     grid = Grid((n, n), comm=comm, planner="estimate")
     h = self_affine(grid, 0.8, 32.0, n / 2, rms_slope=0.1, seed=seed)
@@ -207,21 +229,10 @@ def test_a_correction_that_is_not_positive_is_dropped(comm, monkeypatch):
         return sum_kg, 1e6 * sum_kgg   # theta sum kappa g^2 far above (g, K g)
 
     monkeypatch.setattr(EdgeCorrection, "sums", overdone)
-    # on petgap's own logger: once set up for a run it does not propagate to pytest's
-    records = []
-    handler = logging.Handler()
-    handler.emit = records.append
-    logger = logging.getLogger("petgap")
-    level = logger.level
-    logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
-    try:
+    with solver_notices() as records:
         dropped = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False)
         plain = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False,
                               edge_correction=0.0)
-    finally:
-        logger.removeHandler(handler)
-        logger.setLevel(level)
     assert dropped.converged
     assert sum("going on without it" in r.getMessage() for r in records) == 1
     # dropped at its first preconditioned iteration: the plain solve, step for step

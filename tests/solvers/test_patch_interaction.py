@@ -8,8 +8,6 @@ with the interaction must reach the state it reaches without, in fewer
 iterations, on any number of ranks, and go on without the term where it is not
 positive.
 """
-import logging
-
 import numpy as np
 import pytest
 from mpi4py import MPI
@@ -26,6 +24,7 @@ from petgap.solvers import pressure_cg
 from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.surfaces.self_affine import self_affine
 from test_contact import E_STAR, assert_same_state, max_abs, tolerance_scales
+from test_edge_correction import solver_notices
 
 SIZE = (3.0, 2.0)   # rectangular pixels
 
@@ -192,20 +191,10 @@ def test_an_interaction_that_is_not_positive_is_dropped(comm, monkeypatch):
     original = PatchInteraction.solve
     monkeypatch.setattr(PatchInteraction, "solve",
                         lambda self, w, d: 1e6 * original(self, w, d))
-    records = []
-    handler = logging.Handler()
-    handler.emit = records.append
-    logger = logging.getLogger("petgap")
-    level = logger.level
-    logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
-    try:
+    with solver_notices() as records:
         dropped = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False)
         local = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False,
                               interaction_block=0)
-    finally:
-        logger.removeHandler(handler)
-        logger.setLevel(level)
     assert dropped.converged
     assert sum("patch interaction" in r.getMessage() for r in records) == 1
     assert_same_state(problem.grid, local, dropped, *tolerance_scales(problem, 1e-9))
@@ -216,18 +205,8 @@ def test_a_rising_residual_drops_the_interaction(comm, monkeypatch):
     problem = benchmark_problem(comm)
     control = Load(0.002 * 0.1 * E_STAR)
     monkeypatch.setattr(pressure_cg, "DIVERGENCE", 0.0)   # every residual "rose"
-    records = []
-    handler = logging.Handler()
-    handler.emit = records.append
-    logger = logging.getLogger("petgap")
-    level = logger.level
-    logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
-    try:
+    with solver_notices() as records:
         dropped = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False)
-    finally:
-        logger.removeHandler(handler)
-        logger.setLevel(level)
     local = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False,
                           interaction_block=0)
     assert dropped.converged
