@@ -35,8 +35,8 @@ to .npy, and solved
 
 Usage::
 
-    python benchmarks/contact.py --sizes 512 1024 2048 --ranks 1 2 [--rounds 5] [--tamaas] [--no-coarse]
-        [--edge-correction THETA [THETA ...]] [--interaction-block B [B ...]]
+    python benchmarks/contact.py --sizes 512 1024 2048 --ranks 1 2 [--rounds 5] [--tamaas]
+        [--no-coarse] [--edge-correction THETA [THETA ...]] [--interaction-block B [B ...]]
         [--protocol --work W] [--precision double single mixed]
 """
 import argparse

@@ -10,9 +10,8 @@ of them, at wavenumber ``q``, displaces every patch by the far field of all the
 others, about ``2 phi / (E* q)`` times the pressure for a contact fraction
 ``phi``.  The local ``M`` does not see that, so ``M A`` has eigenvalues of about
 ``1 + 2 phi / (q c)`` on such modes (``c`` a patch's own compliance, a few
-pixels over ``E*``), which grow with the cell's size over the patches' spacing:
-on the benchmark surface the preconditioned condition number is about 4 at
-1024^2 and 8 at 4096^2 with ``M`` alone.
+pixels over ``E*``), which grow with the cell's size over the patches' spacing,
+and so does the preconditioned condition number with ``M`` alone.
 
 The far field is smooth, so it lives on a coarse grid.  Cut the grid into
 blocks of about :data:`BLOCK` pixels a side, let ``R`` sum over the points of
@@ -35,11 +34,11 @@ symmetric, and positive wherever the model is fair (the caller checks
 grid as ``F^{1/2} (I + F^{1/2} D F^{1/2})^{-1} F^{1/2} V^T g`` by conjugate
 gradients (``F^{1/2}`` has no mean mode, as ``F`` has none), to a relative
 residual of :data:`INNER_TOLERANCE`, which keeps the preconditioner the same
-linear operator at every iteration to within a millionth; the coarse grid is replicated on every rank,
-which receive the same block sums and so compute the same ``y``.  On the
-benchmark surface it takes the condition number with a fixed contact set
-from 5.7 to 2.6 at 2048^2 and from 8.6 to 2.5 at 4096^2
-(``benchmarks/patch_spectrum.py``).
+linear operator at every iteration to within a millionth; the coarse grid is
+replicated on every rank, which receive the same block sums and so compute the
+same ``y``.  With it the preconditioned condition number on a fixed contact
+set no longer grows with the grid (``benchmarks/patch_spectrum.py``;
+docs/benchmarks.md, "The preconditioner's patch interaction").
 
 The term is smooth over whole blocks, and the solver's projection onto ``p >=
 0`` is not: :func:`~petgap.solvers.pressure_cg.polonsky_keer` applies it only

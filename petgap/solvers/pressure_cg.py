@@ -35,8 +35,7 @@ stiffness cannot see is the far field by which the contact patches press on
 each other: on a periodic cell the preconditioner also takes off a model of
 that interaction, solved on a grid of blocks of ``interaction_block`` pixels
 (:mod:`petgap.solvers.patch_interaction`), which keeps the preconditioned
-condition number near 2.5 on large grids instead of growing with the number of
-patches.  It does so under load control; under mean-gap control, at contact
+condition number from growing with the number of patches across the cell.  It does so under load control; under mean-gap control, at contact
 fractions beyond a half, it took more iterations than it saved
 (docs/benchmarks.md, "The preconditioner's patch interaction"), and there it
 is not made.  That term is smooth over whole blocks, and the projection onto
