@@ -35,17 +35,18 @@ stiffness cannot see is the far field by which the contact patches press on
 each other: on a periodic cell the preconditioner also takes off a model of
 that interaction, solved on a grid of blocks of ``interaction_block`` pixels
 (:mod:`petgap.solvers.patch_interaction`), which keeps the preconditioned
-condition number from growing with the number of patches across the cell.  It does so under load control; under mean-gap control, at contact
-fractions beyond a half, it took more iterations than it saved
-(docs/benchmarks.md, "The preconditioner's patch interaction"), and there it
-is not made.  That term is smooth over whole blocks, and the projection onto
-``p >= 0`` that follows each step is not: while the contact set is still
-moving it shifts the pressure of many small patches at once, which the
-projection then clips, and on surfaces with patches of a few pixels the set
-can swing without converging.  So the term enters only in an iteration after
-one that changed at most :data:`SETTLED_FRACTION` of ``S``, and a solve whose
-residual rises above :data:`DIVERGENCE` times its lowest with the term in use
-goes on without it (logged); either switch restarts the conjugate gradients.
+condition number from growing with the number of patches across the cell.  It
+does so under load control; under mean-gap control, at contact fractions beyond
+a half, it took more iterations than it saved (docs/benchmarks.md, "The
+preconditioner's patch interaction"), and there it is not made.  That term is
+smooth over whole blocks, and the projection onto ``p >= 0`` that follows each
+step is not: while the contact set is still moving it shifts the pressure of
+many small patches at once, which the projection then clips, and on surfaces
+with patches of a few pixels the set can swing without converging.  So the term
+enters only in an iteration after one that changed at most
+:data:`SETTLED_FRACTION` of ``S``, and a solve whose residual rises above
+:data:`DIVERGENCE` times its lowest with the term in use goes on without it
+(logged); either switch restarts the conjugate gradients.
 
 Restarts (petgap's change to the method)
 ----------------------------------------
