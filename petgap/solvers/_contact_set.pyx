@@ -780,6 +780,12 @@ cdef object _edge_sums(real_t kind, object gS_, object kappa_, const index_t[::1
     return skg, skgg
 
 
+cdef inline Py_ssize_t _block(Py_ssize_t flat, Py_ssize_t first_row, Py_ssize_t nx,
+                              Py_ssize_t ny, Py_ssize_t mx, Py_ssize_t my) noexcept nogil:
+    """The block of the point at ``flat`` in a slab starting at ``first_row`` (:func:`block_sums`)."""
+    return ((flat // ny + first_row) * mx // nx) * my + (flat % ny) * my // ny
+
+
 def block_sums(gS, kappa, const index_t[::1] idx, Py_ssize_t first_row, Py_ssize_t nx,
                Py_ssize_t ny, Py_ssize_t mx, Py_ssize_t my, double[::1] w, double[::1] d):
     """``w[b] += sum kappa g``, ``d[b] += sum kappa`` over the points of S in each block ``b``.
@@ -813,7 +819,7 @@ cdef object _block_sums(real_t kind, object gS_, object kappa_, const index_t[::
     with nogil:
         for k in range(ns):
             flat = idx[k]
-            b = ((flat // ny + first_row) * mx // nx) * my + (flat % ny) * my // ny
+            b = _block(flat, first_row, nx, ny, mx, my)
             kv = <double>kf[flat]
             w[b] += kv * <double>gS[k]
             d[b] += kv
@@ -846,5 +852,5 @@ cdef object _subtract_blocks(real_t kind, object zS_, object kappa_, const index
     with nogil:
         for k in range(ns):
             flat = idx[k]
-            b = ((flat // ny + first_row) * mx // nx) * my + (flat % ny) * my // ny
+            b = _block(flat, first_row, nx, ny, mx, my)
             zS[k] = <real_t>(<double>zS[k] - scale * <double>kf[flat] * y[b])

@@ -107,8 +107,6 @@ class PatchInteraction:
         symbol = np.zeros_like(q)
         np.divide(2.0 / (contact_modulus * cell), q, out=symbol, where=q > 0)
         self._root = np.sqrt(symbol)   # F^{1/2}
-        self._w = np.empty(self.mx * self.my)
-        self._d = np.empty(self.mx * self.my)
         #: coarse conjugate-gradient iterations of the last :meth:`solve`
         self.inner_iterations = 0
 
@@ -117,17 +115,14 @@ class PatchInteraction:
 
     def sums(self, gS, kappa, idx):
         """``(w, d)``: the block sums ``V^T g`` and ``D`` over every rank.  Collective."""
-        w, d = self._w, self._d
-        w[...] = 0.0
-        d[...] = 0.0
-        grid = self.grid
+        grid, m = self.grid, self.mx * self.my
+        both = np.zeros(2 * m)   # w and d, reduced in one message
         _cs.block_sums(gS, kappa, idx, grid.x_slice.start, grid.nx, grid.ny, self.mx, self.my,
-                       w, d)
-        both = np.concatenate([w, d])
+                       both[:m], both[m:])
         if grid.comm.size > 1:
             grid.comm.Allreduce(MPI.IN_PLACE, both, op=MPI.SUM)
         both *= self.share
-        return both[:w.size], both[w.size:]
+        return both[:m], both[m:]
 
     def solve(self, w, d):
         """``y = (F^{-1} + D)^{-1} w`` on the coarse grid (the same on every rank)."""

@@ -28,8 +28,8 @@ from petsc4py import PETSc
 from petgap.mechanics.problem import Load, MeanGap
 from petgap.solvers.convergence import Timer
 from petgap.solvers.edge_correction import EDGE_CORRECTION
-from petgap.solvers.patch_interaction import BLOCK
 from petgap.solvers.gap_cg import gap_cg
+from petgap.solvers.patch_interaction import BLOCK
 from petgap.solvers.pressure_cg import polonsky_keer
 
 #: The solver types run by petgap's own solvers inside a TAO ``python`` type.
