@@ -36,7 +36,8 @@ to .npy, and solved
 Usage::
 
     python benchmarks/contact.py --sizes 512 1024 2048 --ranks 1 2 [--rounds 5] [--tamaas]
-        [--no-coarse] [--edge-correction THETA [THETA ...]] [--interaction-block B [B ...]]
+        [--no-coarse] [--coarse-tolerance T [T ...]] [--edge-correction THETA [THETA ...]]
+        [--interaction-block B [B ...]]
         [--protocol --work W] [--precision double single mixed]
 """
 import argparse
@@ -86,7 +87,9 @@ def worker(args):
     options = {}
     if args.no_coarse:
         options["petgap_coarse_start"] = 0
-    if args.edge_correction[0] is not None:   # a worker is given one value
+    if args.coarse_tolerance[0] is not None:   # a worker is given one value
+        options["petgap_coarse_tolerance"] = args.coarse_tolerance[0]
+    if args.edge_correction[0] is not None:
         options["petgap_edge_correction"] = args.edge_correction[0]
     if args.interaction_block[0] is not None:
         options["petgap_interaction_block"] = args.interaction_block[0]
@@ -229,6 +232,9 @@ def main():
                         help="shares of the contact-edge term taken off pcg-pressure's "
                              "preconditioner, a row each (0: the plain restricted stiffness; "
                              "default: petgap's)")
+    parser.add_argument("--coarse-tolerance", type=float, nargs="+", default=[None],
+                        help="tolerances of the coarse start's solves, a row each (default: "
+                             "petgap's)")
     parser.add_argument("--interaction-block", type=int, nargs="+", default=[None],
                         help="block sides of the patch interaction in pcg-pressure's "
                              "preconditioner, a row each (0: without it; default: petgap's)")
@@ -248,10 +254,13 @@ def main():
         for n in args.sizes:
             surface = Path(tmp) / f"h{n}.npy"
             tam = None
-            for ranks, precision, edge, block in itertools.product(
-                    args.ranks, args.precision, args.edge_correction, args.interaction_block):
+            for ranks, precision, coarse, edge, block in itertools.product(
+                    args.ranks, args.precision, args.coarse_tolerance, args.edge_correction,
+                    args.interaction_block):
                 def arguments(work, mean_gap):
                     out = ["--no-coarse"] if args.no_coarse else []
+                    if coarse is not None:
+                        out += ["--coarse-tolerance", str(coarse)]
                     if edge is not None:
                         out += ["--edge-correction", str(edge)]
                     if block is not None:
@@ -317,6 +326,8 @@ def main():
                     t_cols = [str(tam["iterations"]), f"{tam['time']:.2f}", f"{tam['kkt_gap']:.1e}",
                               f"{res['wall_time'] / tam['time']:.3f}"]
                 label = ", ".join([precision]
+                                  + ([f"coarse tolerance {coarse:g}"] if coarse is not None
+                                     else [])
                                   + ([f"edge correction {edge:g}"] if edge is not None else [])
                                   + ([f"interaction block {block}"] if block is not None else []))
                 print(f"| {n}^2 | {ranks} | {res['solver']} ({label}) | {res['iterations']} "

@@ -35,6 +35,12 @@ WISDOM_DIR_ENV = "PETGAP_WISDOM_DIR"
 #: The binding of each precision (the same source, ``_fftw_body.pxi``, on FFTW's double
 #: and single libraries).
 BINDINGS = {"double": _fftw_mpi, "single": _fftw_mpi_single}
+#: Wisdom files this process imported as rank 0 of a communicator: path -> the
+#: file's (modification time, size) and the world ranks of that communicator.
+#: FFTW keeps imported wisdom for the life of the process, so reading the same
+#: file again for the same ranks (each level of a coarse start makes a grid)
+#: only costs the parse.
+_IMPORTED_WISDOM = {}
 
 
 def weighted_power(c, qx, qy, wrow, power):
@@ -311,13 +317,27 @@ class Grid:
         return root / f"fftw-wisdom-{host}-np{self.comm.size}{single}.txt"
 
     def _load_wisdom(self):
-        text = None
+        # rank 0 decides alone whether to read: the import is collective either way
+        text = path = key = None
         if self.comm.rank == 0:
+            path = self.wisdom_path()
             try:
-                text = self.wisdom_path().read_text()
+                stat = path.stat()
+                key = (stat.st_mtime_ns, stat.st_size, self._world_ranks())
+                if _IMPORTED_WISDOM.get(path) != key:
+                    text = path.read_text()
             except OSError:
                 text = None
-        self._binding.import_wisdom(self.comm, text)
+        if self._binding.import_wisdom(self.comm, text) and key is not None:
+            _IMPORTED_WISDOM[path] = key
+
+    def _world_ranks(self):
+        group, world = self.comm.Get_group(), MPI.COMM_WORLD.Get_group()
+        try:
+            return tuple(MPI.Group.Translate_ranks(group, range(self.comm.size), world))
+        finally:
+            group.Free()
+            world.Free()
 
     def _save_wisdom(self):
         text = self._binding.export_wisdom(self.comm)

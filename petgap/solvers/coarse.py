@@ -44,7 +44,8 @@ Conventions
   messages' latency and little else, and a slab decomposition stops at one
   row per rank.  The finer levels stay distributed.
 * The coarse solve is a start, not a result: its tolerance is
-  ``max(tolerance, COARSE_TOLERANCE)`` and a coarse solve that did not
+  ``max(tolerance, COARSE_TOLERANCE)`` (``-petgap_coarse_tolerance``
+  sets another) and a coarse solve that did not
   converge still gives its pressure (a NaN gives none: the caller then starts
   from the uniform pressure).
 """
@@ -60,12 +61,16 @@ from petgap.parallel.grid import DecompositionError, Grid
 MIN_SIDE = 32
 #: Block size of a coarsening level (see the module docstring for why 2).
 FACTOR = 2
-#: Coarse solves stop here (or at the fine tolerance if that is looser): a
-#: start needs no more; the fine solve's iterations hardly depend on it between
-#: 1e-2 and 1e-6.
-COARSE_TOLERANCE = 1e-4
+#: Coarse solves stop here (or at the fine tolerance if that is looser).  The
+#: prolonged start misses the fine grid's shortest wavelengths, so its residual
+#: there is a few 1e-3 however closely the coarse problem was solved; below
+#: 1e-3 the coarse iterations buy the fine solve nothing, and at 1e-2 the fine
+#: solve takes a few more (docs/benchmarks.md, "The coarse-grid start").
+COARSE_TOLERANCE = 1e-3
 #: Coarse grids of at most this many points are solved whole on every rank.
 WHOLE_POINTS = 256 * 256
+#: Fine rows :func:`prolong` writes at a time.
+PROLONG_CHUNK = 128
 
 
 def coarsening_factor(shape):
@@ -119,13 +124,21 @@ def restrict(grid, coarse, field, f):
     """The block means of ``field`` (this rank's fine slab) on this rank's coarse slab.
 
     A ``coarse`` grid solved whole on every rank (:func:`is_whole`) gets every row.
+    Summed by ``f^2`` strided slices into the coarse rows (NumPy walks a
+    reshaped short axis slowly).  On one rank the rows are all here: no message.
     """
     m = field.shape[0]
     x0 = grid.x_slice.start
-    columns = field.reshape(m, grid.ny // f, f).sum(axis=2)
     first, last = x0 // f, (x0 + m - 1) // f
-    starts = [max(c * f, x0) - x0 for c in range(first, last + 1)]
-    partial = np.add.reduceat(columns, starts, axis=0)  # coarse rows first..last, in part
+    partial = np.zeros((last - first + 1, grid.ny // f))  # coarse rows first..last, in part
+    for i0 in range(f):
+        b0 = (x0 + i0) // f - first   # local rows i0, i0 + f, ... lie in blocks b0, b0 + 1, ...
+        count = len(range(i0, m, f))
+        for j in range(f):
+            partial[b0:b0 + count] += field[i0::f, j::f]
+    if grid.comm.size == 1:
+        partial /= f * f
+        return partial
     lo, hi = coarse.x_slice.start, coarse.x_slice.stop
     out = np.zeros(coarse.local_shape)
     for row, piece in move_rows(grid.comm, partial, first, lo, hi):
@@ -141,19 +154,27 @@ def prolong(first_row, grid, field, f, whole=False):
     ``x_slice.start``): all that is needed of the coarse grid, which the caller
     may then free before the fine field is made.  ``whole``: ``field`` is the
     whole coarse field, the same on every rank (:func:`is_whole`), and each
-    rank takes its rows without messages.  Written row by row into the
-    result: no fine-slab temporaries besides it.
+    rank takes its rows without messages (as does a single rank).  Written by
+    ``f^2`` strided assignments into the result: no fine-slab temporaries
+    besides it.
     """
     m = grid.local_shape[0]
     x0 = grid.x_slice.start
     lo, hi = x0 // f, (x0 + m - 1) // f + 1
-    if whole:
+    if whole or grid.comm.size == 1:
         rows = field[lo:hi]
     else:
         rows = np.empty((hi - lo, field.shape[1]), dtype=field.dtype)
         for row, piece in move_rows(grid.comm, field, first_row, lo, hi):
             rows[row - lo:row - lo + len(piece)] = piece
     out = np.empty(grid.local_shape, dtype=field.dtype)
-    for i in range(m):
-        out[i].reshape(-1, f)[...] = rows[(x0 + i) // f - lo][:, None]
+    # by chunks of rows, so that the strided writes fault in fresh pages at the pace of
+    # contiguous ones (first touching the whole slab strided costs several times more)
+    for a in range(0, m, PROLONG_CHUNK):
+        part = out[a:a + PROLONG_CHUNK]
+        for i0 in range(f):
+            b0 = (x0 + a + i0) // f - lo   # rows i0, i0 + f, ... repeat rows b0, b0 + 1, ...
+            count = len(range(i0, len(part), f))
+            for j in range(f):
+                part[i0::f, j::f] = rows[b0:b0 + count]
     return out

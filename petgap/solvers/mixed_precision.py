@@ -21,6 +21,7 @@ import numpy as np
 from petgap.io.scene import SINGLE_TOLERANCE_FLOOR
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
+from petgap.solvers.coarse import COARSE_TOLERANCE
 from petgap.solvers.convergence import Timer
 from petgap.solvers.edge_correction import EDGE_CORRECTION
 from petgap.solvers.patch_interaction import BLOCK
@@ -48,7 +49,7 @@ def single_precision_twin(problem):
 
 def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monitor=None,
                 coarse_start=True, initial_pressure=None, edge_correction=EDGE_CORRECTION,
-                interaction_block=BLOCK):
+                interaction_block=BLOCK, coarse_tolerance=COARSE_TOLERANCE):
     """Solve ``problem`` (double precision) under load or mean gap, first in single.
 
     The single-precision solve runs to ``max(tolerance, SINGLE_TOLERANCE_FLOOR)``
@@ -68,6 +69,7 @@ def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monit
                            max_iterations=max_iterations, monitor=monitor,
                            coarse_start=coarse_start, edge_correction=edge_correction,
                            interaction_block=interaction_block,
+                           coarse_tolerance=coarse_tolerance,
                            initial_pressure=None if initial_pressure is None
                            else initial_pressure.astype(np.float32))
     start_ops = single.operator_applications

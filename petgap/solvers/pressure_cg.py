@@ -153,7 +153,8 @@ STALL_FACTOR = 0.9
 
 def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                   initial_pressure=None, monitor=None, preconditioned=True, coarse_start=True,
-                  edge_correction=EDGE_CORRECTION, interaction_block=BLOCK):
+                  edge_correction=EDGE_CORRECTION, interaction_block=BLOCK,
+                  coarse_tolerance=coarse.COARSE_TOLERANCE):
     """Solve non-adhesive contact under load or mean-gap control.
 
     Parameters
@@ -185,6 +186,9 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         (:mod:`petgap.solvers.patch_interaction`); 0 leaves it out.  Made only
         with the edge correction, under load control on periodic cells.  Passed
         on to the coarse start.
+    coarse_tolerance : float
+        The tolerance the coarse start's solves stop at (or ``tolerance`` if
+        that is looser; :data:`petgap.solvers.coarse.COARSE_TOLERANCE`).
 
     Returns
     -------
@@ -200,6 +204,10 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         raise ValueError(f"interaction_block = {interaction_block!r} is not allowed: the side "
                          f"of the patch interaction's blocks is a whole number of pixels >= 1, "
                          f"or 0 to leave the interaction out")
+    if not (isinstance(coarse_tolerance, (int, float, np.floating))
+            and 0 < coarse_tolerance < np.inf):
+        raise ValueError(f"coarse_tolerance = {coarse_tolerance!r} is not allowed: the tolerance "
+                         f"of the coarse start's solves is a positive number")
     grid, comm = problem.grid, problem.grid.comm
     h = problem.topography
     dtype = h.dtype   # the grid's precision: every field and set vector in it, sums in double
@@ -239,7 +247,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     start = "warm" if initial_pressure is not None else ""
     if initial_pressure is None and coarse_start:
         initial_pressure, start = coarse_start_pressure(problem, control, tolerance, max_iterations,
-                                                        edge_correction, interaction_block)
+                                                        edge_correction, interaction_block,
+                                                        coarse_tolerance)
     start_time = timer()
     if initial_pressure is None:
         start = "; ".join(filter(None, [
@@ -549,11 +558,13 @@ def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, 
 
 
 def coarse_start_pressure(problem, control, tolerance, max_iterations,
-                          edge_correction=EDGE_CORRECTION, interaction_block=BLOCK):
+                          edge_correction=EDGE_CORRECTION, interaction_block=BLOCK,
+                          coarse_tolerance=coarse.COARSE_TOLERANCE):
     """A fine-grid pressure to start from: the solution on a coarser grid, prolonged.
 
     The coarse problem and the transfers are :mod:`petgap.solvers.coarse`'s;
-    the coarse solve is this module's own.  Returns ``(pressure, a line saying
+    the coarse solve is this module's own, to ``max(tolerance,
+    coarse_tolerance)``.  Returns ``(pressure, a line saying
     how it was found)``, or ``(None, "")`` when the grid is not coarsened (the caller's own
     cold start applies) or the coarse solve produced NaN.  Collective.
     """
@@ -561,9 +572,10 @@ def coarse_start_pressure(problem, control, tolerance, max_iterations,
     if coarse_problem is None:
         return None, ""
     solution = polonsky_keer(coarse_problem, control,
-                             tolerance=max(tolerance, coarse.COARSE_TOLERANCE),
+                             tolerance=max(tolerance, coarse_tolerance),
                              max_iterations=max_iterations, edge_correction=edge_correction,
-                             interaction_block=interaction_block)
+                             interaction_block=interaction_block,
+                             coarse_tolerance=coarse_tolerance)
     pressure = solution.pressure
     finite = problem.grid.comm.allreduce(bool(np.isfinite(pressure).all()), op=MPI.LAND)
     cgrid = coarse_problem.grid

@@ -26,6 +26,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from petgap.mechanics.problem import Load, MeanGap
+from petgap.solvers.coarse import COARSE_TOLERANCE
 from petgap.solvers.convergence import Timer
 from petgap.solvers.edge_correction import EDGE_CORRECTION
 from petgap.solvers.gap_cg import gap_cg
@@ -432,7 +433,8 @@ def solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial,
         seed = polonsky_keer(hard, Load(max(target, 1e-3 * problem.pressure_scale)),
                              tolerance=max(tolerance, 1e-6), max_iterations=max_iterations,
                              edge_correction=settings["edge_correction"],
-                             interaction_block=settings["interaction_block"])
+                             interaction_block=settings["interaction_block"],
+                             coarse_tolerance=settings["coarse_tolerance"])
         iterations += seed.iterations
         gap_guess, state = seed.mean_gap, seed
     points, history = [], []
@@ -574,7 +576,8 @@ class petsc_options:
 def pressure_solver_options():
     """petgap's own options of :func:`~petgap.solvers.pressure_cg.polonsky_keer`, as its keywords.
 
-    ``-petgap_coarse_start`` (default true), ``-petgap_edge_correction``
+    ``-petgap_coarse_start`` (default true), ``-petgap_coarse_tolerance``
+    (default :data:`~petgap.solvers.coarse.COARSE_TOLERANCE`), ``-petgap_edge_correction``
     (default :data:`~petgap.solvers.edge_correction.EDGE_CORRECTION`) and
     ``-petgap_interaction_block`` (default
     :data:`~petgap.solvers.patch_interaction.BLOCK`, 0 leaves the patch
@@ -583,6 +586,7 @@ def pressure_solver_options():
     """
     db = PETSc.Options()
     return {"coarse_start": db.getBool("petgap_coarse_start", True),
+            "coarse_tolerance": db.getReal("petgap_coarse_tolerance", COARSE_TOLERANCE),
             "edge_correction": db.getReal("petgap_edge_correction", EDGE_CORRECTION),
             "interaction_block": db.getInt("petgap_interaction_block", BLOCK)}
 
@@ -610,7 +614,8 @@ KNOWN_OPTIONS = {
     "tao_fd_gradient": "bool", "tao_fd_hessian": "bool", "tao_subset_type": "word",
     "tao_ls_type": "word",
     # petgap's own
-    "petgap_coarse_start": "bool", "petgap_edge_correction": "real",
+    "petgap_coarse_start": "bool", "petgap_coarse_tolerance": "real",
+    "petgap_edge_correction": "real",
     "petgap_interaction_block": "int",
     # PETSc at large (profiling, debugging), read at initialisation or finalisation
     "log_view": "viewer", "log_view_memory": "bool", "log_all": "bool", "log_trace": "viewer",

@@ -72,3 +72,22 @@ def test_serial_grid_on_comm_self(comm):
     """A COMM_SELF grid is a complete serial reference inside an MPI job."""
     grid = Grid((9, 10), comm=MPI.COMM_SELF, planner="estimate")
     assert grid.local_shape == (9, 10) and grid.fourier_local_shape == (6, 9)
+
+
+def test_wisdom_is_read_again_only_when_the_file_changed(comm, mpi_tmp_path, monkeypatch):
+    """Each level of a coarse start makes a grid: the cached wisdom file is parsed
+    once per process and set of ranks, and again once a planning run rewrote it."""
+    import pathlib
+    monkeypatch.setenv("PETGAP_WISDOM_DIR", str(mpi_tmp_path))
+    reads = []
+    read_text = pathlib.Path.read_text
+    monkeypatch.setattr(pathlib.Path, "read_text",
+                        lambda self, *a, **k: reads.append(self.name) or read_text(self, *a, **k))
+    Grid((40, 36), comm=comm, planner="measure")          # plans, writes the file
+    for _ in range(3):
+        Grid((20, 18), comm=comm, planner="estimate")
+    first = len(reads)
+    Grid((44, 36), comm=comm, planner="measure")          # another size: the file is rewritten
+    Grid((20, 18), comm=comm, planner="estimate")
+    # rank 0 reads, then broadcasts what it read
+    assert comm.allgather((first, len(reads))) == [(1, 2)] + [(0, 0)] * (comm.size - 1)

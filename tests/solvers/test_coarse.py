@@ -36,12 +36,19 @@ def test_coarsening_depends_on_the_shape_alone():
 
 
 @pytest.mark.parametrize("shape, f", [((36, 16), 4), ((130, 64), 2)])
-def test_restriction_and_prolongation_match_numpy(comm, shape, f):
+@pytest.mark.parametrize("chunk", [coarse_module.PROLONG_CHUNK, 3])
+@pytest.mark.parametrize("one_rank", [False, True])
+def test_restriction_and_prolongation_match_numpy(comm, shape, f, chunk, one_rank, monkeypatch):
     """Block means and block repeats, whatever the two decompositions.
 
     (36, 16) on 2 ranks: fine rows 18 + 18, coarse rows 5 + 4, so coarse row 4
-    takes fine rows 16-19 from both ranks; (130, 64): 65 + 65 and 33 + 32.
+    takes fine rows 16-19 from both ranks; (130, 64): 65 + 65 and 33 + 32.  Also
+    on one rank (no messages), and prolonged 3 rows at a time (chunks that cut
+    blocks).
     """
+    monkeypatch.setattr(coarse_module, "PROLONG_CHUNK", chunk)
+    if one_rank:
+        comm = MPI.COMM_SELF
     grid = make_grid(shape, comm, size=(2.0, 1.0))
     coarse = make_grid((shape[0] // f, shape[1] // f), comm, size=(2.0, 1.0))
     rng = np.random.default_rng(7)
@@ -197,3 +204,36 @@ def test_coarse_planning_time_is_said_per_level(comm):
               for n, how in ((128, first), (64, "single"), (32, "single"))]
     assert [m.split(":")[0] for m in planned] == levels * 2
     assert all(m.endswith("(estimate)") for m in planned)
+
+
+def test_the_coarse_tolerance_reaches_the_solvers(comm):
+    """``-petgap_coarse_tolerance`` (and the keyword) sets where every coarse level stops:
+    looser, the levels take fewer iterations, and the fine solve still converges."""
+    from petgap.solvers.dispatch import solve
+    from petgap.solvers.mixed_precision import solve_mixed
+    problem = _rough(make_grid((256, 256), comm))
+    control = Load(0.02 * problem.pressure_scale)
+    default = polonsky_keer(problem, control, tolerance=1e-8)
+    loose = solve(problem, control, solver="pcg-pressure", tolerance=1e-8,
+                  options={"petgap_coarse_tolerance": "0.05"})
+    direct = polonsky_keer(problem, control, tolerance=1e-8, coarse_tolerance=0.05)
+    assert default.converged and loose.converged
+    assert loose.start == direct.start != default.start
+    assert list(loose.history) == list(direct.history)
+
+    def coarse_iterations(solution):
+        return sum(int(part.split(": ")[1].split()[0]) for part in solution.start.split("; "))
+    assert coarse_iterations(loose) < coarse_iterations(default)
+    mixed = solve(problem, control, tolerance=1e-8, precision="mixed",
+                  options={"petgap_coarse_tolerance": "0.05"})
+    assert mixed.start == solve_mixed(problem, control, tolerance=1e-8,
+                                      coarse_tolerance=0.05).start
+    assert mixed.start != solve_mixed(problem, control, tolerance=1e-8).start
+
+
+@pytest.mark.parametrize("value", [0, -1e-3, float("inf"), float("nan"), "1e-3"])
+def test_a_coarse_tolerance_that_is_not_positive_is_refused(comm, value):
+    problem = _rough(make_grid((64, 64), comm))
+    with pytest.raises(ValueError, match=r"coarse_tolerance = .* is not allowed: the tolerance "
+                                         r"of the coarse start's solves is a positive number"):
+        polonsky_keer(problem, Load(0.02 * problem.pressure_scale), coarse_tolerance=value)
