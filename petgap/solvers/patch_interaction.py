@@ -131,15 +131,15 @@ class PatchInteraction:
         b = self._half(w.reshape(shape))
         x = np.zeros(shape)
         r = b.copy()
-        rr = bb = float(np.vdot(r, r))
+        rr = bb = _dot(r, r)
         p = r.copy()
         k = 0
         while rr > INNER_TOLERANCE ** 2 * bb and k < 10 * self.mx * self.my:
             ap = p + self._half(d * self._half(p))
-            alpha = rr / float(np.vdot(p, ap))
+            alpha = rr / _dot(p, ap)
             x += alpha * p
             r -= alpha * ap
-            rr, rr_old = float(np.vdot(r, r)), rr
+            rr, rr_old = _dot(r, r), rr
             p *= rr / rr_old
             p += r
             k += 1
@@ -151,6 +151,12 @@ class PatchInteraction:
         grid = self.grid
         _cs.subtract_blocks(zS, kappa, idx, grid.x_slice.start, grid.nx, grid.ny, self.mx,
                             self.my, y, self.share)
+
+
+def _dot(a, b):
+    # np.vdot of two 2-D arrays takes a path some 20 times slower than np.dot of their
+    # flat views, which matters at a few hundred products per outer iteration
+    return float(np.dot(a.ravel(), b.ravel()))
 
 
 def patch_interaction(half_space, theta, block=BLOCK):

@@ -264,7 +264,9 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
               else problem.top_height - target)
     if initial_pressure is not None or not load:
         if initial_pressure is not None:
-            p = np.asarray(initial_pressure, dtype=dtype)
+            # in its own precision: the set rounds the values it keeps to the grid's,
+            # so a coarse start's single-precision field is not copied to double first
+            p = np.asarray(initial_pressure)
         else:
             # Mean-gap or indentation control: pressure where the undeformed
             # surfaces overlap.
