@@ -45,7 +45,14 @@ The term is smooth over whole blocks, and the solver's projection onto ``p >=
 once the contact set has nearly stopped changing, and drops it if the residual
 rises (its module docstring says why).
 
-The solver makes it under load control only (its module docstring says why).
+The solver makes it under load control only (its module docstring says why),
+and only on cells of at most :data:`MAX_SIDE` blocks a side: on the benchmark
+surface at 16384^2 (512 of 32 pixels, or 256 of 64) a step with the term
+shifts many small patches at once even while the set changes by under a
+percent per iteration, the set swings for dozens of iterations, and the solve
+took 91 iterations against 34 without the term (docs/benchmarks.md, "16384^2
+on this machine").  No rule for when to apply it has yet been found that holds
+there.
 
 Cost: one pass over ``S`` for the block sums, one to subtract ``V y``, an
 all-reduce of two coarse fields, and a few dozen transforms of the coarse grid
@@ -60,7 +67,7 @@ from petgap.solvers import _contact_set as _cs
 
 #: Side of a block, in pixels, over which the far field is taken as constant.
 BLOCK = 32
-#: The coarse grid has at most this many blocks a side (larger blocks beyond).
+#: Most blocks a side for the correction to be made at all (module docstring).
 MAX_SIDE = 256
 #: Fewest blocks a side for the correction to be made at all: with fewer the
 #: cell's longest wavelengths are too few patches long for their far field to
@@ -75,8 +82,8 @@ INNER_TOLERANCE = 1e-6
 
 
 def blocks(n, block=BLOCK):
-    """Blocks along a side of ``n`` pixels: about ``n / block``, at most :data:`MAX_SIDE`."""
-    return min(max(n // block, 1), MAX_SIDE)
+    """Blocks along a side of ``n`` pixels: ``n // block``, at least one."""
+    return max(n // block, 1)
 
 
 class PatchInteraction:
@@ -163,11 +170,13 @@ def patch_interaction(half_space, theta, block=BLOCK):
     """A :class:`PatchInteraction` for ``half_space``'s grid, or None where it is not made.
 
     None on a free boundary and where the coarse grid would have fewer than
-    :data:`MIN_SIDE` blocks a side (``block = 0`` turns it off).
+    :data:`MIN_SIDE` or more than :data:`MAX_SIDE` blocks a side (``block = 0``
+    turns it off).
     """
     grid = half_space.grid
     if not block or not half_space.periodic:
         return None
-    if min(blocks(grid.nx, block), blocks(grid.ny, block)) < MIN_SIDE:
+    sides = (blocks(grid.nx, block), blocks(grid.ny, block))
+    if min(sides) < MIN_SIDE or max(sides) > MAX_SIDE:
         return None
     return PatchInteraction(grid, half_space.contact_modulus, theta, block)

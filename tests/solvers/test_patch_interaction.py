@@ -19,7 +19,7 @@ from petgap.solvers import _contact_set as _cs
 from petgap.solvers import pressure_cg
 from petgap.solvers.dispatch import solve
 from petgap.solvers.mixed_precision import solve_mixed
-from petgap.solvers.patch_interaction import (MIN_SIDE, PatchInteraction, blocks,
+from petgap.solvers.patch_interaction import (MAX_SIDE, MIN_SIDE, PatchInteraction, blocks,
                                               patch_interaction)
 from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.surfaces.self_affine import self_affine
@@ -114,7 +114,11 @@ def test_no_interaction_where_it_does_not_apply(comm):
     assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6) is None  # 30 blocks a side
     assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=30) is not None
     assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=0) is None
-    assert blocks(100000) == 256
+    # more than MAX_SIDE blocks along either side: not made (where the rule for applying
+    # it has been seen to fail), not made of larger blocks
+    assert blocks(1200, 4) == 300 > MAX_SIDE
+    assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=4) is None
+    assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=5) is not None  # 240
 
 
 def benchmark_problem(comm, n=1024, seed=1):
