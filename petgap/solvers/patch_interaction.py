@@ -47,12 +47,12 @@ rises (its module docstring says why).
 
 The solver makes it under load control only (its module docstring says why),
 and only on cells of at most :data:`MAX_SIDE` blocks a side: on the benchmark
-surface at 16384^2 (512 of 32 pixels, or 256 of 64) a step with the term
-shifts many small patches at once even while the set changes by under a
-percent per iteration, the set swings for dozens of iterations, and the solve
-took 91 iterations against 34 without the term (docs/benchmarks.md, "16384^2
-on this machine").  No rule for when to apply it has yet been found that holds
-there.
+surface at 16384^2 (256 blocks of 64 pixels) a step with the term shifted many
+small patches at once even while the set changed by under a percent per
+iteration, the set swung for some 25 iterations, and the solve took 91
+iterations against 34 without the term (docs/benchmarks.md, "The
+preconditioner's patch interaction").  No rule for when to apply it has yet
+been found that holds there.
 
 Cost: one pass over ``S`` for the block sums, one to subtract ``V y``, an
 all-reduce of two coarse fields, and a few dozen transforms of the coarse grid
