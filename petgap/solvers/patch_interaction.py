@@ -46,13 +46,13 @@ once the contact set has nearly stopped changing, and drops it if the residual
 rises (its module docstring says why).
 
 The solver makes it under load control only (its module docstring says why),
-and only on cells of at most :data:`MAX_SIDE` blocks a side: on the benchmark
-surface at 16384^2 (256 blocks of 64 pixels) a step with the term shifted many
-small patches at once even while the set changed by under a percent per
-iteration, the set swung for some 25 iterations, and the solve took 91
-iterations against 34 without the term (docs/benchmarks.md, "The
-preconditioner's patch interaction").  No rule for when to apply it has yet
-been found that holds there.
+and only on cells of at most :data:`MAX_SIDE` blocks a side: on larger cells
+(the benchmark surface at 16384^2) a step with the term shifted many small
+patches at once even while the set changed by less than the solver's
+settled fraction per iteration, the set swung for dozens of iterations, and
+the solve took far more iterations than without the term (docs/benchmarks.md,
+"The preconditioner's patch interaction").  No rule for when to apply it has
+yet been found that holds there.
 
 Cost: one pass over ``S`` for the block sums, one to subtract ``V y``, an
 all-reduce of two coarse fields, and a few dozen transforms of the coarse grid
