@@ -44,8 +44,8 @@ for when to apply it does not hold (:mod:`petgap.solvers.patch_interaction`).
 That term is smooth over whole blocks, and the projection onto ``p >= 0`` that
 follows each step is not: while the contact set is still moving it shifts the
 pressure of many small patches at once, which the projection then clips, and
-on surfaces with patches of a few pixels the set can swing without converging.  So the term
-enters only in an iteration after one that changed at most
+on surfaces with patches of a few pixels the set can swing without converging.
+So the term enters only in an iteration after one that changed at most
 :data:`SETTLED_FRACTION` of ``S``, and a solve whose residual rises above
 :data:`DIVERGENCE` times its lowest with the term in use goes on without it
 (logged); either switch restarts the conjugate gradients.
