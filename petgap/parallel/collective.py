@@ -75,8 +75,13 @@ def move_rows(comm, block, first, lo, hi):
     ``block`` holds global rows ``first, first + 1, ...``; this rank wants rows
     ``lo <= row < hi`` from whoever holds them.  Returns ``(first row, rows)``
     for every non-empty piece received, in rank order; pieces overlap where
-    two ranks hold parts of the same row (partial sums).
+    two ranks hold parts of the same row (partial sums).  On one rank the one
+    piece is a view of ``block`` (no message to itself), so callers copy the
+    pieces out before they change ``block``.
     """
+    if comm.size == 1:
+        start, stop = max(lo, first), min(hi, first + len(block))
+        return [(start, block[start - first:stop - first])] if stop > start else []
     block = np.ascontiguousarray(block, dtype=float)
     k, width = block.shape
     held = comm.allgather((first, first + k))

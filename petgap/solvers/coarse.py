@@ -125,7 +125,8 @@ def restrict(grid, coarse, field, f):
 
     A ``coarse`` grid solved whole on every rank (:func:`is_whole`) gets every row.
     Summed by ``f^2`` strided slices into the coarse rows (NumPy walks a
-    reshaped short axis slowly).  On one rank the rows are all here: no message.
+    reshaped short axis slowly).  On one rank the partial rows are the coarse
+    slab itself, without a second coarse field to add them into.
     """
     m = field.shape[0]
     x0 = grid.x_slice.start
@@ -154,9 +155,9 @@ def prolong(first_row, grid, field, f, whole=False):
     ``x_slice.start``): all that is needed of the coarse grid, which the caller
     may then free before the fine field is made.  ``whole``: ``field`` is the
     whole coarse field, the same on every rank (:func:`is_whole`), and each
-    rank takes its rows without messages (as does a single rank).  Written by
-    ``f^2`` strided assignments into the result: no fine-slab temporaries
-    besides it.
+    rank takes its rows without messages; so does a single rank, reading the
+    field where it is rather than a copy of it.  Written by ``f^2`` strided
+    assignments into the result: no fine-slab temporaries besides it.
     """
     m = grid.local_shape[0]
     x0 = grid.x_slice.start
