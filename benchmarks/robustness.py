@@ -16,9 +16,10 @@ It prints a markdown table per surface kind (converged solves, fine iterations
 in all, the largest count, the worst KKT residual, the largest difference in
 contact fraction between the two starts, the solves in which the
 preconditioner's contact-edge correction was dropped as not positive on the
-gap, and those in which its patch interaction was dropped, as not positive or
-because the residual rose) and exits with status 1 if any solve did not
-converge.
+gap, those in which its patch interaction was dropped as not positive, and
+those in which the patch interaction was withdrawn at least once because the
+residual rose after a step with it) and exits with status 1 if any solve did
+not converge.
 ``--restart-fraction 0`` runs Polonsky and Keer's own restart rule (conjugacy
 dropped whenever a point enters the contact set) for comparison with petgap's
 (:data:`petgap.solvers.pressure_cg.RESTART_FRACTION`, the rule without the
@@ -51,15 +52,15 @@ def surfaces(quick):
     return kinds
 
 
-class DroppedCorrections(logging.Handler):
-    """Counts the solver's notices that it went on without a term of its preconditioner."""
+class Notices(logging.Handler):
+    """Counts the solver's notices that name a term of its preconditioner and what befell it."""
 
-    def __init__(self, term):
+    def __init__(self, term, event):
         super().__init__(logging.INFO)
-        self.term, self.count = term, 0
+        self.term, self.event, self.count = term, event, 0
 
     def emit(self, record):
-        self.count += self.term in record.msg
+        self.count += self.term in record.msg and self.event in record.msg
 
 
 def main():
@@ -81,11 +82,13 @@ def main():
 
     theta = EDGE_CORRECTION if args.edge_correction is None else args.edge_correction
     block = BLOCK if args.interaction_block is None else args.interaction_block
-    dropped = DroppedCorrections("contact-edge correction")
-    dropped_far = DroppedCorrections("patch interaction")
+    dropped = Notices("contact-edge correction", "going on without it")
+    dropped_far = Notices("patch interaction", "going on without it")
+    withdrawn = Notices("patch interaction", "withdrawn until")
     solver_log = get_logger("pressure_cg")
     solver_log.addHandler(dropped)
     solver_log.addHandler(dropped_far)
+    solver_log.addHandler(withdrawn)
     solver_log.setLevel(logging.INFO)
 
     if args.restart_fraction is not None:
@@ -95,7 +98,7 @@ def main():
     gaps = np.geomspace(2.0, 0.05, 5)
     rows, failures, started = [], 0, time.perf_counter()
     for name, n, hurst, lmin, seeds in surfaces(args.quick):
-        solves = converged = iterations = worst_its = drops = far_drops = 0
+        solves = converged = iterations = worst_its = drops = far_drops = withdrawals = 0
         worst_kkt = worst_dc = 0.0
         for seed in seeds:
             grid = petgap.Grid((n, n), planner="estimate")
@@ -108,7 +111,7 @@ def main():
             for control in controls:
                 fractions = []
                 for coarse_start in (True, False):
-                    before, far_before = dropped.count, dropped_far.count
+                    before, far_before, back = dropped.count, dropped_far.count, withdrawn.count
                     s = pressure_cg.polonsky_keer(problem, control, tolerance=1e-8,
                                                   coarse_start=coarse_start,
                                                   edge_correction=theta,
@@ -116,6 +119,7 @@ def main():
                     solves += 1
                     drops += dropped.count > before
                     far_drops += dropped_far.count > far_before
+                    withdrawals += withdrawn.count > back
                     converged += bool(s.converged)
                     iterations += s.iterations
                     worst_its = max(worst_its, s.iterations)
@@ -128,7 +132,7 @@ def main():
                 worst_dc = max(worst_dc, abs(fractions[0] - fractions[1]))
         failures += solves - converged
         rows.append((name, len(seeds), solves, converged, iterations, worst_its, worst_kkt,
-                     worst_dc, drops, far_drops))
+                     worst_dc, drops, far_drops, withdrawals))
     if comm.rank == 0:
         rule = pressure_cg.RESTART_FRACTION
         print(f"restart fraction {rule:g} (without the patch interaction), edge correction "
@@ -136,14 +140,14 @@ def main():
               f"{time.perf_counter() - started:.0f} s\n")
         print("| surfaces | seeds | solves | converged | fine iterations | most | worst KKT "
               "| largest c difference between starts | edge correction dropped "
-              "| patch interaction dropped |")
-        print("|---|---|---|---|---|---|---|---|---|---|")
+              "| patch interaction dropped | patch interaction withdrawn |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
         for r in rows:
             print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]} | {r[4]} | {r[5]} | {r[6]:.1e} | "
-                  f"{r[7]:.1e} | {r[8]} | {r[9]} |")
-        total = [sum(r[k] for r in rows) for k in (2, 3, 4, 8, 9)]
+                  f"{r[7]:.1e} | {r[8]} | {r[9]} | {r[10]} |")
+        total = [sum(r[k] for r in rows) for k in (2, 3, 4, 8, 9, 10)]
         print(f"| all | | {total[0]} | {total[1]} | {total[2]} | | | | {total[3]} | "
-              f"{total[4]} |")
+              f"{total[4]} | {total[5]} |")
     sys.exit(1 if failures else 0)
 
 

@@ -42,23 +42,20 @@ docs/benchmarks.md, "The preconditioner's patch interaction").
 
 The term is smooth over whole blocks, and the solver's projection onto ``p >=
 0`` is not: :func:`~petgap.solvers.pressure_cg.polonsky_keer` applies it only
-once the contact set has nearly stopped changing, and drops it if the residual
-rises (its module docstring says why).
-
-The solver makes it under load control only (its module docstring says why),
-and only on cells of at most :data:`MAX_SIDE` blocks a side: on larger cells
-(the benchmark surface at 16384^2) a step with the term shifted many small
-patches at once even while the set changed by less than the solver's
-settled fraction per iteration, the set swung for dozens of iterations, and
-the solve took far more iterations than without the term (docs/benchmarks.md,
-"The preconditioner's patch interaction").  No rule for when to apply it has
-yet been found that holds there.
+once the contact set has nearly stopped changing, and withdraws it for a while
+when the residual rose after a step with it (its module docstring says why).
+The solver makes it under load control only (the same docstring says why).
 
 Cost: one pass over ``S`` for the block sums, one to subtract ``V y``, an
-all-reduce of two coarse fields, and a few dozen transforms of the coarse grid
-(at most :data:`MAX_SIDE` a side), all of it small beside a transform pair of
-the fine grid.  Periodic cells only: on a free boundary the far field is a
-different operator.
+all-reduce of two coarse fields, and a few dozen transforms of the coarse grid,
+small beside a transform pair of the fine grid.  The coarse grid is solved
+alike on every rank, whatever their number, so its cost does not shrink as the
+ranks share the fine grid: beyond :data:`MAX_SIDE` blocks a side the blocks
+grow instead (at 16384^2, 256 blocks of 64 pixels).  Larger blocks model the
+far field more coarsely and the solve converges a little more slowly than with
+32-pixel blocks, but without the term it takes far more iterations
+(docs/benchmarks.md, "The preconditioner's patch interaction").  Periodic cells
+only: on a free boundary the far field is a different operator.
 """
 import numpy as np
 from mpi4py import MPI
@@ -67,7 +64,8 @@ from petgap.solvers import _contact_set as _cs
 
 #: Side of a block, in pixels, over which the far field is taken as constant.
 BLOCK = 32
-#: Most blocks a side for the correction to be made at all (module docstring).
+#: The coarse grid has at most this many blocks a side, larger blocks beyond
+#: (module docstring).
 MAX_SIDE = 256
 #: Fewest blocks a side for the correction to be made at all: with fewer the
 #: cell's longest wavelengths are too few patches long for their far field to
@@ -82,8 +80,8 @@ INNER_TOLERANCE = 1e-6
 
 
 def blocks(n, block=BLOCK):
-    """Blocks along a side of ``n`` pixels: ``n // block``, at least one."""
-    return max(n // block, 1)
+    """Blocks along a side of ``n`` pixels: ``n // block``, at least 1, at most :data:`MAX_SIDE`."""
+    return min(max(n // block, 1), MAX_SIDE)
 
 
 class PatchInteraction:
@@ -170,13 +168,11 @@ def patch_interaction(half_space, theta, block=BLOCK):
     """A :class:`PatchInteraction` for ``half_space``'s grid, or None where it is not made.
 
     None on a free boundary and where the coarse grid would have fewer than
-    :data:`MIN_SIDE` or more than :data:`MAX_SIDE` blocks a side (``block = 0``
-    turns it off).
+    :data:`MIN_SIDE` blocks a side (``block = 0`` turns it off).
     """
     grid = half_space.grid
     if not block or not half_space.periodic:
         return None
-    sides = (blocks(grid.nx, block), blocks(grid.ny, block))
-    if min(sides) < MIN_SIDE or max(sides) > MAX_SIDE:
+    if min(blocks(grid.nx, block), blocks(grid.ny, block)) < MIN_SIDE:
         return None
     return PatchInteraction(grid, half_space.contact_modulus, theta, block)

@@ -38,17 +38,21 @@ that interaction, solved on a grid of blocks of ``interaction_block`` pixels
 condition number from growing with the number of patches across the cell.  It
 does so under load control; under mean-gap control, at contact fractions beyond
 a half, it took more iterations than it saved (docs/benchmarks.md, "The
-preconditioner's patch interaction"), and there it is not made; nor on cells of
-more than 256 blocks a side (16384^2 with 32-pixel blocks), where the rule below
-for when to apply it does not hold (:mod:`petgap.solvers.patch_interaction`).
+preconditioner's patch interaction"), and there it is not made.
 That term is smooth over whole blocks, and the projection onto ``p >= 0`` that
 follows each step is not: while the contact set is still moving it shifts the
 pressure of many small patches at once, which the projection then clips, and
 on surfaces with patches of a few pixels the set can swing without converging.
 So the term enters only in an iteration after one that changed at most
-:data:`SETTLED_FRACTION` of ``S``, and a solve whose residual rises above
-:data:`DIVERGENCE` times its lowest with the term in use goes on without it
-(logged); either switch restarts the conjugate gradients.
+:data:`SETTLED_FRACTION` of ``S``.  On a set that has settled a step with it is
+nearly a Newton step and the residual after it falls; where it rises instead,
+the step moved more of the set than it settled (on large cells, where the far
+field is strong, a few tenths of a percent of ``S`` can swing back and forth
+for dozens of iterations), and the term is withdrawn until an iteration changes
+at most :data:`WITHDRAWN_FACTOR` times the fraction that let it in, so that
+each withdrawal waits for a more settled set than the last (docs/benchmarks.md,
+"The preconditioner's patch interaction").  Each switch restarts the conjugate
+gradients, and each withdrawal is logged.
 
 Restarts (petgap's change to the method)
 ----------------------------------------
@@ -141,10 +145,13 @@ from petgap.solvers.patch_interaction import BLOCK, patch_interaction
 RESTART_FRACTION = 0.003
 #: The patch interaction enters the preconditioner only in an iteration after
 #: one that changed at most this fraction of the contact set (points clipped or
-#: entering), and leaves it for good if the residual rises above
-#: ``DIVERGENCE`` times its lowest; see "Preconditioning" in the module docstring.
+#: entering).  A step with it after which the residual is above ``RISE_FACTOR``
+#: times the residual before it withdraws it, and it enters again only after
+#: an iteration that changed at most ``WITHDRAWN_FACTOR`` times the fraction
+#: that let it in; see "Preconditioning" in the module docstring.
 SETTLED_FRACTION = 0.01
-DIVERGENCE = 10.0
+RISE_FACTOR = 1.0
+WITHDRAWN_FACTOR = 0.1
 #: A single-precision solve stops as ``"stalled_round_off"`` when its residual
 #: has not fallen below ``STALL_FACTOR`` times its best for ``STALL_ITERATIONS``
 #: iterations (see "Precision" in the module docstring).  Far from the floor
@@ -315,7 +322,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     far = (patch_interaction(half_space, edge_correction, interaction_block)
            if edge is not None and load else None)
     settled = far_used = False   # S changed little in the last iteration; V y applied in it
-    lowest = np.inf
+    admit, far_from = SETTLED_FRACTION, np.inf   # what "little" is; the residual V y was used at
     if contact is None and not periodic:
         contact = ContactSet.everywhere(mask, padded_width, target, dtype=dtype)  # C P0 is not zero
     if contact is None:
@@ -370,12 +377,13 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         if verdict:
             converged, reason = verdict == "converged_kkt", verdict
             break
-        if far_used and residual > DIVERGENCE * lowest:
+        if far_used and residual > RISE_FACTOR * far_from:
+            admit *= WITHDRAWN_FACTOR
             get_logger("pressure_cg").info(
-                "iteration %d: the residual rose to %.3g times its lowest with the patch "
-                "interaction in the preconditioner; going on without it", it, residual / lowest)
-            far, far_used, delta = None, False, 0.0   # a new preconditioner: restart
-        lowest = min(lowest, residual)
+                "iteration %d: the residual rose from %.3g to %.3g in a step with the patch "
+                "interaction in the preconditioner; withdrawn until an iteration changes at "
+                "most %.3g of the contact set", it, far_from, residual, admit)
+            far_used, settled, delta = False, False, 0.0   # a new preconditioner: restart
         if watch_stall:
             if residual < STALL_FACTOR * best:
                 best, best_it = residual, it
@@ -423,7 +431,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                         far.subtract(zS, edge.kappa, idx, y)
                         gz -= far_gz
                         sum_z -= far_z
-                        far_used = True
+                        far_used, far_from = True, residual
                     else:
                         get_logger("pressure_cg").info(
                             "iteration %d: the patch interaction of the preconditioner is not "
@@ -477,7 +485,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             sum_p += _cs.overlap_pressures(u, h, added, offset - shift, tau * stiffness, added_p)
         n_overlap, n_clipped, sum_p = global_sums(comm, entering + len(added), clipped, sum_p)
         delta = 0.0 if n_overlap > (0 if far_used else RESTART_FRACTION) * n_contact else 1.0
-        settled = n_overlap + n_clipped <= SETTLED_FRACTION * n_contact
+        settled = n_overlap + n_clipped <= admit * n_contact
         scale = target * n / sum_p if load else 1.0
         if clipped or len(added):
             del idx, pidx, pS, tS, gS  # views of buffers merge may replace
