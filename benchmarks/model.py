@@ -56,7 +56,7 @@ PAIRS_PER_ITERATION = 2.9
 BYTES_PER_POINT, FIXED_BYTES = 46.0, 91e6
 #: Iterations of the GUIDE surface at 512^2-16384^2 (docs/benchmarks.md, "Non-adhesive rough
 #: contact" and "16384^2 on this machine").
-ITERATIONS = {512: 13, 1024: 13, 2048: 14, 4096: 16, 8192: 18, 16384: 30}
+ITERATIONS = {512: 13, 1024: 13, 2048: 14, 4096: 15, 8192: 17, 16384: 27}
 
 
 def solve_worker(n):
