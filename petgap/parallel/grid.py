@@ -267,6 +267,17 @@ class Grid:
         array[...] = 0.0
         return array
 
+    def scratch(self):
+        """A contiguous field of this rank's slab, ``local_shape``, on the real FFT buffer's memory.
+
+        For a field that is read before the next transform overwrites it (a
+        prolonged start the solver reads once into its contact set).  Why borrow
+        rather than allocate: the buffer's pages are mapped by the first
+        transform anyway, and a fresh slab's first touch is not free (on a
+        virtual machine, where the host maps each new page, seconds per GB).
+        """
+        return self.padded.reshape(-1)[:self.local_shape[0] * self.ny].reshape(self.local_shape)
+
     def backward(self):
         """Inverse FFT of :attr:`fourier` into :attr:`real`, *without* the ``1/(nx ny)``.
 

@@ -148,7 +148,7 @@ def restrict(grid, coarse, field, f):
     return out
 
 
-def prolong(first_row, grid, field, f, whole=False):
+def prolong(first_row, grid, field, f, whole=False, out=None):
     """``field`` (this rank's coarse slab) repeated over each block, on this rank's fine slab.
 
     ``first_row`` is the global coarse row the slab starts at (the coarse grid's
@@ -157,7 +157,10 @@ def prolong(first_row, grid, field, f, whole=False):
     whole coarse field, the same on every rank (:func:`is_whole`), and each
     rank takes its rows without messages; so does a single rank, reading the
     field where it is rather than a copy of it.  Written by ``f^2`` strided
-    assignments into the result: no fine-slab temporaries besides it.
+    assignments into the result: no fine-slab temporaries besides it.  ``out``:
+    a contiguous array of the fine slab's shape to write into (e.g.
+    :meth:`petgap.parallel.grid.Grid.scratch`), converting to its dtype; by
+    default a new one of ``field``'s dtype.
     """
     m = grid.local_shape[0]
     x0 = grid.x_slice.start
@@ -168,7 +171,8 @@ def prolong(first_row, grid, field, f, whole=False):
         rows = np.empty((hi - lo, field.shape[1]), dtype=field.dtype)
         for row, piece in move_rows(grid.comm, field, first_row, lo, hi):
             rows[row - lo:row - lo + len(piece)] = piece
-    out = np.empty(grid.local_shape, dtype=field.dtype)
+    if out is None:
+        out = np.empty(grid.local_shape, dtype=field.dtype)
     # by chunks of rows, so that the strided writes fault in fresh pages at the pace of
     # contiguous ones (first touching the whole slab strided costs several times more)
     for a in range(0, m, PROLONG_CHUNK):

@@ -277,8 +277,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
               else problem.top_height - target)
     if initial_pressure is not None or not load:
         if initial_pressure is not None:
-            # in its own precision: the set rounds the values it keeps to the grid's,
-            # so a coarse start's single-precision field is not copied to double first
+            # in its own precision: the set rounds the values it keeps to the grid's
+            # (a coarse start's field lies in the FFT buffer, read here before any transform)
             p = np.asarray(initial_pressure)
         else:
             # Mean-gap or indentation control: pressure where the undeformed
@@ -287,9 +287,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         # S = {p > 0}, with p there: the negative part is dropped on the way in
         # (no pass of its own), and p is rescaled to the load on S alone.
         contact = ContactSet.from_pressure(mask, padded_width, p, dtype=dtype)
-        # a coarse start's prolonged field is referenced here only: free its slab
-        # before the iterations allocate theirs
-        del p
+        del p   # not needed past here: an overlap's field goes before the iterations' fields come
         initial_pressure = None
         if load:
             total = global_sums(comm, contact.p.sum(dtype=np.float64))[0]
@@ -501,7 +499,12 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             _cs.recurrence(u, padded, tau, scale, ny)
             contact.p[...] *= scale
             scale = 1.0
-    edge = far = None   # kappa and its mask: freed before the result's fields are made
+    # kappa's slab, dead now, takes the result's pressure (its pages are mapped, where a
+    # fresh slab's first touch costs seconds per GB on a virtual machine); its mask goes
+    result_p = edge.kappa if edge is not None else None
+    if result_p is not None and (result_p.shape != grid.local_shape or result_p.dtype != dtype):
+        result_p = None
+    edge = far = None
 
     # Residuals are taken on the gap as computed; the stored field (and the
     # scalars derived from it) is its projection onto the contact state found:
@@ -514,7 +517,11 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     on, off = _cs.final_gap(u, h, mask, offset - shift, g)
     del u
     residuals = (0.0, comm.allreduce(float(np.max([on, off])), op=MPI.MAX) / problem.gap_scale)
-    p = np.zeros(grid.local_shape, dtype=dtype)
+    if result_p is None:
+        p = np.zeros(grid.local_shape, dtype=dtype)
+    else:
+        p = result_p
+        p[...] = 0
     p.ravel()[contact.idx] = contact.p
     contact = mask.view(bool)  # 0 or 1: a valid boolean array, no copy
     return problem.make_solution(
@@ -582,7 +589,9 @@ def coarse_start_pressure(problem, control, tolerance, max_iterations,
     the coarse solve is this module's own, to ``max(tolerance,
     coarse_tolerance)``.  Returns ``(pressure, a line saying
     how it was found)``, or ``(None, "")`` when the grid is not coarsened (the caller's own
-    cold start applies) or the coarse solve produced NaN.  Collective.
+    cold start applies) or the coarse solve produced NaN.  The pressure is the
+    fine grid's :meth:`~petgap.parallel.grid.Grid.scratch`, in the grid's
+    precision: read it before the next transform.  Collective.
     """
     coarse_problem = coarse.coarse_problem(problem)
     if coarse_problem is None:
@@ -603,9 +612,10 @@ def coarse_start_pressure(problem, control, tolerance, max_iterations,
     factor = problem.grid.nx // cgrid.nx
     first_row = cgrid.x_slice.start
     whole = coarse.is_whole(problem.grid, cgrid)
-    # the coarse problem, grid and solution go before the fine field is made
+    # the coarse problem, grid and solution go before the fine iterations make their fields
     del solution, coarse_problem, cgrid
-    return coarse.prolong(first_row, problem.grid, pressure, factor, whole), description
+    return (coarse.prolong(first_row, problem.grid, pressure, factor, whole,
+                           out=problem.grid.scratch()), description)
 
 
 def full_contact_load(problem):

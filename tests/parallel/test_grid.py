@@ -68,6 +68,17 @@ def test_bad_shapes(comm):
         Grid((4, 4), size=(1.0, -1.0), comm=comm)
 
 
+@pytest.mark.parametrize("precision", ["double", "single"])
+def test_scratch_is_a_contiguous_slab_on_the_real_fft_buffer(comm, precision):
+    grid = Grid((30, 21), comm=comm, planner="estimate", precision=precision)
+    scratch = grid.scratch()
+    assert scratch.shape == grid.local_shape and scratch.dtype == grid.dtype
+    assert scratch.flags.c_contiguous and np.shares_memory(scratch, grid.padded)
+    # it starts where the buffer does and ends within the padded slab
+    assert scratch.__array_interface__["data"][0] == grid.padded.__array_interface__["data"][0]
+    assert scratch.size <= grid.padded.size
+
+
 def test_serial_grid_on_comm_self(comm):
     """A COMM_SELF grid is a complete serial reference inside an MPI job."""
     grid = Grid((9, 10), comm=MPI.COMM_SELF, planner="estimate")

@@ -16,7 +16,7 @@ from petgap.solvers.coarse import (coarse_problem, coarsening_factor, is_whole, 
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.parallel.grid import Grid
-from petgap.solvers.pressure_cg import polonsky_keer
+from petgap.solvers.pressure_cg import coarse_start_pressure, polonsky_keer
 from petgap.surfaces.self_affine import self_affine
 from test_contact import (E_STAR, assert_same_state, max_abs, solve_on_three_ranks,
                           tolerance_scales)
@@ -79,6 +79,35 @@ def test_whole_coarse_grid_on_every_rank_matches_numpy(comm):
     repeated = np.repeat(np.repeat(coarse_field, f, axis=0), f, axis=1)
     assert grid.comm.allreduce(float(np.abs(means - expected).max()), op=MPI.MAX) <= 1e-14
     assert max_abs(grid, fine - grid.local_part(repeated)) == 0.0
+
+
+@pytest.mark.parametrize("whole", [False, True])
+def test_prolongation_into_the_fine_grids_fft_buffer(comm, whole):
+    """``out`` takes the block repeats in its own dtype (a single-precision start into
+    a double grid's buffer) and is what is returned: no slab of its own."""
+    shape, f = (130, 64), 2
+    grid = make_grid(shape, comm, size=(2.0, 1.0))
+    coarse = make_grid((65, 32), MPI.COMM_SELF if whole else comm, size=(2.0, 1.0))
+    coarse_field = np.random.default_rng(5).standard_normal((65, 32)).astype(np.float32)
+    local = coarse_field if whole else coarse.local_part(coarse_field).copy()
+    out = grid.scratch()
+    fine = prolong(coarse.x_slice.start, grid, local, f, whole=whole, out=out)
+    repeated = np.repeat(np.repeat(coarse_field, f, axis=0), f, axis=1).astype(np.float64)
+    assert fine is out and fine.dtype == np.float64
+    assert np.shares_memory(fine, grid.padded)
+    assert max_abs(grid, fine - grid.local_part(repeated)) == 0.0
+
+
+def test_the_coarse_start_lies_in_the_fine_grids_fft_buffer(comm):
+    """The prolonged start borrows the fine grid's real FFT buffer (read once, before the
+    first transform) in the grid's precision, instead of a slab of its own."""
+    grid = make_grid((128, 128), comm)
+    problem = _rough(grid)
+    pressure, description = coarse_start_pressure(problem, Load(0.05), 1e-8, 1000)
+    assert description.startswith("coarse 64x64")
+    assert pressure.shape == grid.local_shape and pressure.dtype == grid.dtype
+    assert np.shares_memory(pressure, grid.padded)
+    assert grid.comm.allreduce(float(pressure.sum())) / grid.npoints == pytest.approx(0.05)
 
 
 def test_small_coarse_grids_are_solved_whole_on_every_rank(comm, monkeypatch):
