@@ -298,6 +298,10 @@ def main():
                     iterating(r) / max(r["operator_applications"], 1) / f
                     for r, f in zip(runs, around))
                 to_solution = statistics.median(r["wall_time"] / f for r, f in zip(runs, around))
+                if args.rounds > 1:   # the spread the median hides, beside the table
+                    print(f"N={n} ranks={ranks} {precision}: floor pairs to solution by round "
+                          + ", ".join(f"{r['wall_time'] / f:.0f}" for r, f in zip(runs, around)),
+                          file=sys.stderr, flush=True)
                 # the same on the iterations' span: [seconds, operator seconds, applications]
                 loops = [(r["loop"], f) for r, f in zip(runs, around) if r.get("loop")]
                 if loops:
