@@ -5,8 +5,9 @@ fields, on a grid whose blocks do not divide it evenly and whose slab boundary
 cuts through a block under ``mpirun -n 2``; the coarse solve against a dense
 solve of ``(F^{-1} + D) y = w`` built from the compliance's symbol; the solver
 with the interaction must reach the state it reaches without, in fewer
-iterations, on any number of ranks, and go on without the term where it is not
-positive.
+iterations, on any number of ranks, go on without the term where it is not
+positive, and withdraw it after a step that raised the residual; beyond
+``MAX_SIDE`` blocks a side the coarse grid is clamped.
 """
 import numpy as np
 import pytest
