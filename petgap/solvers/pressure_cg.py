@@ -287,7 +287,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         # S = {p > 0}, with p there: the negative part is dropped on the way in
         # (no pass of its own), and p is rescaled to the load on S alone.
         contact = ContactSet.from_pressure(mask, padded_width, p, dtype=dtype)
-        del p   # not needed past here: an overlap's field goes before the iterations' fields come
+        del p   # an overlap's field (mean-gap control) is freed before the iterations' fields
         initial_pressure = None
         if load:
             total = global_sums(comm, contact.p.sum(dtype=np.float64))[0]
