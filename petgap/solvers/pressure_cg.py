@@ -499,11 +499,10 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             _cs.recurrence(u, padded, tau, scale, ny)
             contact.p[...] *= scale
             scale = 1.0
-    # kappa's slab, dead now, takes the result's pressure (its pages are mapped, where a
-    # fresh slab's first touch costs seconds per GB on a virtual machine); its mask goes
-    result_p = edge.kappa if edge is not None else None
-    if result_p is not None and (result_p.shape != grid.local_shape or result_p.dtype != dtype):
-        result_p = None
+    # kappa and its mask: freed before the result's fields are made.  The result's pressure
+    # is a fresh zeroed slab, not kappa's: the pages of its non-contact regions are never
+    # written, so they cost neither resident memory nor a first touch (a sweep or the
+    # adhesive protocol keeps such results while the next solve runs)
     edge = far = None
 
     # Residuals are taken on the gap as computed; the stored field (and the
@@ -517,11 +516,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     on, off = _cs.final_gap(u, h, mask, offset - shift, g)
     del u
     residuals = (0.0, comm.allreduce(float(np.max([on, off])), op=MPI.MAX) / problem.gap_scale)
-    if result_p is None:
-        p = np.zeros(grid.local_shape, dtype=dtype)
-    else:
-        p = result_p
-        p[...] = 0
+    p = np.zeros(grid.local_shape, dtype=dtype)
     p.ravel()[contact.idx] = contact.p
     contact = mask.view(bool)  # 0 or 1: a valid boolean array, no copy
     return problem.make_solution(
