@@ -297,11 +297,11 @@ def main():
                 solve_ratio = statistics.median(
                     iterating(r) / max(r["operator_applications"], 1) / f
                     for r, f in zip(runs, around))
-                to_solution = statistics.median(r["wall_time"] / f for r, f in zip(runs, around))
+                by_round = [r["wall_time"] / f for r, f in zip(runs, around)]
+                to_solution = statistics.median(by_round)
                 if args.rounds > 1:   # the spread the median hides, beside the table
                     print(f"N={n} ranks={ranks} {precision}: floor pairs to solution by round "
-                          + ", ".join(f"{r['wall_time'] / f:.0f}" for r, f in zip(runs, around)),
-                          file=sys.stderr, flush=True)
+                          + ", ".join(f"{x:.0f}" for x in by_round), file=sys.stderr, flush=True)
                 # the same on the iterations' span: [seconds, operator seconds, applications]
                 loops = [(r["loop"], f) for r, f in zip(runs, around) if r.get("loop")]
                 if loops:

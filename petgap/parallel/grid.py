@@ -267,16 +267,19 @@ class Grid:
         array[...] = 0.0
         return array
 
-    def scratch(self):
-        """A contiguous field of this rank's slab, ``local_shape``, on the real FFT buffer's memory.
+    def scratch(self, padded=None):
+        """A contiguous field of this rank's slab, ``local_shape``, on a padded buffer's memory.
 
-        For a field that is read before the next transform overwrites it (a
-        prolonged start the solver reads once into its contact set).  Why borrow
-        rather than allocate: the buffer's pages are mapped by the first
-        transform anyway, and a fresh slab's first touch is not free (on a
-        virtual machine, where the host maps each new page, seconds per GB).
+        ``padded``: an array shaped like :attr:`padded` (e.g. from
+        :meth:`aligned_padded`); by default the real FFT buffer itself, for a
+        field that is read before the next transform overwrites it (a prolonged
+        start the solver reads once into its contact set).  Why borrow rather
+        than allocate: the buffer's pages are mapped anyway, and a fresh slab's
+        first touch is not free (on a virtual machine, where the host maps each
+        new page, seconds per GB).
         """
-        return self.padded.reshape(-1)[:self.local_shape[0] * self.ny].reshape(self.local_shape)
+        padded = self.padded if padded is None else padded
+        return padded.reshape(-1)[:self.local_shape[0] * self.ny].reshape(self.local_shape)
 
     def backward(self):
         """Inverse FFT of :attr:`fourier` into :attr:`real`, *without* the ``1/(nx ny)``.

@@ -227,7 +227,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     timer = Timer()
     refresh_interval = 50  # bound the round-off drift of the u recurrence
     n = grid.npoints
-    n_local, ny = h.size, grid.ny
+    ny = grid.ny
     load = isinstance(control, Load)
     periodic = problem.half_space.periodic
     if load:
@@ -331,7 +331,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         # Its first iteration in closed form (one transform instead of three,
         # and no set of every point); the uniform set itself only where that
         # iteration is also the last.
-        scratch = u.reshape(-1)[:n_local].reshape(grid.local_shape)
+        scratch = grid.scratch(u)
         first_step = _uniform_first_iteration(problem, mask, padded_width, target, scratch,
                                               tolerance, max_iterations, monitor)
         if first_step is None:
@@ -512,7 +512,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     # The gap is written over u, compacted to the unpadded layout in place (no
     # new slab to allocate and fault in): row i moves to where it starts at or
     # before its old place, so nothing is overwritten before it is read.
-    g = u.reshape(-1)[:n_local].reshape(grid.local_shape)
+    g = grid.scratch(u)
     on, off = _cs.final_gap(u, h, mask, offset - shift, g)
     del u
     residuals = (0.0, comm.allreduce(float(np.max([on, off])), op=MPI.MAX) / problem.gap_scale)

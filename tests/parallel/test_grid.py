@@ -77,6 +77,11 @@ def test_scratch_is_a_contiguous_slab_on_the_real_fft_buffer(comm, precision):
     # it starts where the buffer does and ends within the padded slab
     assert scratch.__array_interface__["data"][0] == grid.padded.__array_interface__["data"][0]
     assert scratch.size <= grid.padded.size
+    # the same view of another padded array (a field a solver keeps in the padded layout)
+    other = grid.aligned_padded()
+    view = grid.scratch(other)
+    assert view.shape == grid.local_shape and view.flags.c_contiguous
+    assert view.__array_interface__["data"][0] == other.__array_interface__["data"][0]
 
 
 def test_serial_grid_on_comm_self(comm):
