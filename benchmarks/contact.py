@@ -37,7 +37,7 @@ Usage::
 
     python benchmarks/contact.py --sizes 512 1024 2048 --ranks 1 2 [--rounds 5] [--tamaas]
         [--no-coarse] [--coarse-tolerance T [T ...]] [--edge-correction THETA [THETA ...]]
-        [--interaction-block B [B ...]]
+        [--interaction-block B [B ...]] [--search-precision double single]
         [--protocol --work W] [--precision double single mixed]
 """
 import argparse
@@ -93,6 +93,8 @@ def worker(args):
         options["petgap_edge_correction"] = args.edge_correction[0]
     if args.interaction_block[0] is not None:
         options["petgap_interaction_block"] = args.interaction_block[0]
+    if args.search_precision[0] is not None:
+        options["petgap_search_precision"] = args.search_precision[0]
     if options:
         solver["petsc_options"] = options
     scene = Scene.from_dict({
@@ -238,6 +240,11 @@ def main():
     parser.add_argument("--interaction-block", type=int, nargs="+", default=[None],
                         help="block sides of the patch interaction in pcg-pressure's "
                              "preconditioner, a row each (0: without it; default: petgap's)")
+    parser.add_argument("--search-precision", nargs="+", default=[None],
+                        choices=["double", "single"],
+                        help="precision of pcg-pressure's search (its preconditioner's and "
+                             "its direction's transforms) on a double grid, a row each "
+                             "(default: petgap's)")
     parser.add_argument("--protocol", action="store_true",
                         help="the paper's adhesive protocol: solve the non-adhesive load first, "
                              "then the adhesive problem (--work, --range) at its mean gap")
@@ -254,9 +261,9 @@ def main():
         for n in args.sizes:
             surface = Path(tmp) / f"h{n}.npy"
             tam = None
-            for ranks, precision, coarse, edge, block in itertools.product(
+            for ranks, precision, coarse, edge, block, search in itertools.product(
                     args.ranks, args.precision, args.coarse_tolerance, args.edge_correction,
-                    args.interaction_block):
+                    args.interaction_block, args.search_precision):
                 def arguments(work, mean_gap):
                     out = ["--no-coarse"] if args.no_coarse else []
                     if coarse is not None:
@@ -265,6 +272,8 @@ def main():
                         out += ["--edge-correction", str(edge)]
                     if block is not None:
                         out += ["--interaction-block", str(block)]
+                    if search is not None:
+                        out += ["--search-precision", search]
                     out += ["--solver", args.solver, "--precision", precision,
                             "--tolerance", str(args.tolerance),
                            "--max-iterations", str(args.max_iterations), "--load", str(args.load),
@@ -300,7 +309,9 @@ def main():
                 by_round = [r["wall_time"] / f for r, f in zip(runs, around)]
                 to_solution = statistics.median(by_round)
                 if args.rounds > 1:   # the spread the median hides, beside the table
-                    print(f"N={n} ranks={ranks} {precision}: floor pairs to solution by round "
+                    print(f"N={n} ranks={ranks} {precision}"
+                          + (f", {search} search" if search is not None else "")
+                          + ": floor pairs to solution by round "
                           + ", ".join(f"{x:.0f}" for x in by_round), file=sys.stderr, flush=True)
                 # the same on the iterations' span: [seconds, operator seconds, applications]
                 loops = [(r["loop"], f) for r, f in zip(runs, around) if r.get("loop")]
@@ -330,6 +341,7 @@ def main():
                     t_cols = [str(tam["iterations"]), f"{tam['time']:.2f}", f"{tam['kkt_gap']:.1e}",
                               f"{res['wall_time'] / tam['time']:.3f}"]
                 label = ", ".join([precision]
+                                  + ([f"{search} search"] if search is not None else [])
                                   + ([f"coarse tolerance {coarse:g}"] if coarse is not None
                                      else [])
                                   + ([f"edge correction {edge:g}"] if edge is not None else [])

@@ -168,12 +168,16 @@ class FreeHalfSpace:
             return self._periodic.apply_in_buffer(inverse=False)
         return self._compliance(self.grid.real, self.grid.real)
 
-    def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None):
+    def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None,
+                     precision=None):
         """:meth:`ElasticHalfSpace.apply_sparse <petgap.mechanics.half_space.ElasticHalfSpace.apply_sparse>`
-        with ``C`` for ``inverse=True`` (the map's padded FFT buffer is scratch)."""
+        with ``C`` for ``inverse=True`` (the map's padded FFT buffer is scratch).
+
+        ``C`` is applied in the map's precision whatever ``precision`` asks:
+        ``values`` and ``gathered`` are converted on the way in and out."""
         if not inverse:
             return self._periodic.apply_sparse(pidx, values, inverse=False, out=out,
-                                               gathered=gathered)
+                                               gathered=gathered, precision=precision)
         grid = self.grid
         padded = grid.padded
         padded[...] = 0.0
@@ -272,8 +276,11 @@ class PaddedCellHalfSpace:
         self._multiply(self._compliance if inverse else self._stiffness)
         return self.grid.real
 
-    def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None):
-        """As :meth:`ElasticHalfSpace.apply_sparse <petgap.mechanics.half_space.ElasticHalfSpace.apply_sparse>`."""
+    def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None,
+                     precision=None):
+        """As :meth:`ElasticHalfSpace.apply_sparse <petgap.mechanics.half_space.ElasticHalfSpace.apply_sparse>`,
+        in the cell's precision whatever ``precision`` asks (``values`` and
+        ``gathered`` converted on the way in and out)."""
         grid = self.grid
         padded = grid.padded
         padded[...] = 0.0

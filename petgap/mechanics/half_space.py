@@ -99,7 +99,8 @@ class ElasticHalfSpace:
             return self._convolve(self._compliance, -1)
         return self._convolve(self._stiffness, 1)
 
-    def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None):
+    def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None,
+                     precision=None):
         """Apply ``K`` (or ``K^{-1}``) to a field given on a set of points only.
 
         The field is ``values`` at the sorted padded-slab indices ``pidx`` and
@@ -108,11 +109,23 @@ class ElasticHalfSpace:
         :meth:`petgap.parallel.grid.Grid.aligned_padded`), or only its values at
         ``pidx`` to ``gathered``.  Same operator as :meth:`apply_in_buffer`
         without its slab-sized fill and, gathered, its slab-sized output.
+
+        ``precision="single"`` on a double grid transforms in single precision
+        on :meth:`petgap.parallel.grid.Grid.single_precision_alias` (in the grid's
+        own buffers): ``values``, ``out`` and ``gathered`` are then float32, and
+        the result without them is in the alias's ``real`` (on the first half of
+        ``grid.real``'s bytes).  It counts as an application like any other.
         """
         scale, power = (self._compliance, -1) if inverse else (self._stiffness, 1)
+        grid = self.grid
+        if precision == "single":
+            grid = grid.single_precision_alias()
+        elif precision not in (None, grid.precision):
+            raise ValueError(f"precision = {precision!r} is not allowed: need 'single', or "
+                             f"the grid's own {grid.precision!r}")
         self._applications += 1
         with event(OPERATOR_EVENT):
-            self.grid.convolve_qpower_sparse(pidx, values, scale, power, out, gathered)
+            grid.convolve_qpower_sparse(pidx, values, scale, power, out, gathered)
 
     def pressure(self, displacement, out=None):
         """Zero-mean pressure ``p = K u`` that holds the displacement ``u``.

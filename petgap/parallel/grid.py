@@ -106,7 +106,7 @@ class Grid:
     """
 
     def __init__(self, shape, size=None, comm=None, planner="measure", wisdom=True,
-                 precision="double"):
+                 precision="double", _buffers_of=None):
         if precision not in BINDINGS:
             raise ValueError(f"precision = {precision!r} is not allowed: need one of "
                              f"{', '.join(map(repr, BINDINGS))}")
@@ -133,9 +133,15 @@ class Grid:
         self.local_shape = (ln0, ny)
         self.fourier_local_shape = (ln1, nx)
 
-        # FFT buffers: the padded real slab and the transposed Fourier slab.
-        self._real_storage = _aligned_empty(2 * alloc, self.dtype)
-        self._fourier_storage = _aligned_empty(alloc, self.complex_dtype)
+        # FFT buffers: the padded real slab and the transposed Fourier slab (a single-precision
+        # alias's are the first halves of its double grid's: single_precision_alias)
+        if _buffers_of is None:
+            self._real_storage = _aligned_empty(2 * alloc, self.dtype)
+            self._fourier_storage = _aligned_empty(alloc, self.complex_dtype)
+        else:
+            self._real_storage = _buffers_of._real_storage.view(self.dtype)[:2 * alloc]
+            self._fourier_storage = _buffers_of._fourier_storage.view(self.complex_dtype)[:alloc]
+        self._alias = None
         #: The real-space FFT buffer in FFTW's padded r2c layout, ``(nx_local,
         #: 2 (ny // 2 + 1))``: kernels that fill or read the buffer in a pass of
         #: their own, and the flat indices of :meth:`convolve_qpower_sparse`, use it.
@@ -280,6 +286,27 @@ class Grid:
         """
         padded = self.padded if padded is None else padded
         return padded.reshape(-1)[:self.local_shape[0] * self.ny].reshape(self.local_shape)
+
+    def single_precision_alias(self):
+        """This grid in single precision, its transforms working in this grid's FFT buffers.
+
+        Same shape, size, communicator and decomposition; its :attr:`padded`,
+        :attr:`real` and :attr:`fourier` are 32-bit views of the first half of
+        this grid's bytes (so using either grid's buffers overwrites the
+        other's).  For a solver that needs some transforms only roughly -- a
+        preconditioner, a step length -- at the cost of a single-precision
+        transform and with no slab of its own.  Made on the first call and kept
+        (a single-precision grid is its own alias).  Collective the first time:
+        planning may overwrite both grids' buffers, so call it when they hold
+        nothing needed.
+        """
+        if self.precision == "single":
+            return self
+        if self._alias is None:
+            self._alias = Grid(self.shape, size=(self.Lx, self.Ly), comm=self.comm,
+                               planner=self.planner, wisdom=self.wisdom, precision="single",
+                               _buffers_of=self)
+        return self._alias
 
     def backward(self):
         """Inverse FFT of :attr:`fourier` into :attr:`real`, *without* the ``1/(nx ny)``.

@@ -294,10 +294,42 @@ cdef object _direction_from_buffer(real_t kind, object pad_, const index_t[::1] 
 
 
 def step_sums(pad, const index_t[::1] pidx, gS, tS):
-    """Returns ``(sum r, sum g t, sum r t, sum t)`` over S with ``r = pad = K^{-1} P_S t``."""
+    """Returns ``(sum r, sum g t, sum r t, sum t)`` over S with ``r = pad = K^{-1} P_S t``.
+
+    ``pad`` may be float32 with double ``gS`` and ``tS``: a double solve's direction
+    imaged in single precision (:func:`petgap.solvers.pressure_cg.polonsky_keer`).
+    """
+    if _mixed(pad, gS) and tS.dtype == _FLOAT64:
+        return _step_sums_mixed(pad, pidx, gS, tS)
     if _single("step_sums", "pad gS tS", (pad, gS, tS)):
         return _step_sums[float](0, pad, pidx, gS, tS)
     return _step_sums[double](0, pad, pidx, gS, tS)
+
+
+cdef bint _mixed(pad, field):
+    """True for a float32 ``pad`` beside a float64 ``field``: a single image in a double solve."""
+    return pad.dtype == _FLOAT32 and field.dtype == _FLOAT64
+
+
+cdef object _step_sums_mixed(const float[:, ::1] pad, const index_t[::1] pidx,
+                             const double[::1] gS, const double[::1] tS):
+    cdef Py_ssize_t k, ns = pidx.shape[0]
+    cdef double r, t, sr = 0.0, sgt = 0.0, srt = 0.0, st = 0.0
+    cdef const float *pf
+    if ns == 0:
+        return 0.0, 0.0, 0.0, 0.0
+    if gS.shape[0] < ns or tS.shape[0] < ns:
+        raise ValueError("step_sums: gS and tS are shorter than pidx")
+    pf = &pad[0, 0]
+    with nogil:
+        for k in range(ns):
+            r = pf[pidx[k]]
+            t = tS[k]
+            sr += r
+            sgt += gS[k] * t
+            srt += r * t
+            st += t
+    return sr, sgt, srt, st
 
 
 cdef object _step_sums(real_t kind, object pad_, const index_t[::1] pidx, object gS_,
@@ -482,12 +514,31 @@ cdef object _merge(real_t kind, index_t[::1] idx, index_t[::1] pidx, object pS_,
 def recurrence(u, pad, double tau, double scale, Py_ssize_t columns):
     """``u = scale (u - tau r)`` with ``r = pad``, on the first ``columns`` columns.
 
-    The displacement of the updated pressure, both fields in the padded layout.
+    The displacement of the updated pressure, both fields in the padded layout;
+    ``pad`` may be float32 beside a double ``u`` (a direction imaged in single
+    precision: its rounding enters the step ``tau r``, not ``u``).
     """
-    if _single("recurrence", "u pad", (u, pad)):
+    if _mixed(pad, u):
+        _recurrence_mixed(u, pad, tau, scale, columns)
+    elif _single("recurrence", "u pad", (u, pad)):
         _recurrence[float](0, u, pad, tau, scale, columns)
     else:
         _recurrence[double](0, u, pad, tau, scale, columns)
+
+
+cdef object _recurrence_mixed(double[:, ::1] u, const float[:, ::1] pad, double tau,
+                             double scale, Py_ssize_t columns):
+    cdef Py_ssize_t i, j, m = u.shape[0]
+    cdef double *ur
+    cdef const float *rr
+    if pad.shape[0] != m or columns > u.shape[1] or columns > pad.shape[1]:
+        raise ValueError("recurrence: u and pad do not describe the same slab")
+    with nogil:
+        for i in range(m):
+            ur = &u[i, 0]
+            rr = &pad[i, 0]
+            for j in range(columns):
+                ur[j] = scale * (ur[j] - tau * <double>rr[j])
 
 
 cdef object _recurrence(real_t kind, object u_, object pad_, double tau, double scale,

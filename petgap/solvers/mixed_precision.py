@@ -14,7 +14,10 @@ at a few edge points.
 The twin is the same cell, topography (rounded to 32 bits), modulus and
 interaction on a single-precision :class:`~petgap.parallel.grid.Grid` of the
 same shape and communicator; its peak memory is below the double solve's, and
-it is freed before the double solve allocates its own.
+it is freed before the double solve allocates its own.  The double solve finds
+its steps in single precision (``search_precision="single"`` of
+:func:`~petgap.solvers.pressure_cg.polonsky_keer`): its answer is double's, and
+its path depends on the decomposition at the level the single solve's already does.
 """
 import numpy as np
 
@@ -49,12 +52,14 @@ def single_precision_twin(problem):
 
 def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monitor=None,
                 coarse_start=True, initial_pressure=None, edge_correction=EDGE_CORRECTION,
-                interaction_block=BLOCK, coarse_tolerance=COARSE_TOLERANCE):
+                interaction_block=BLOCK, coarse_tolerance=COARSE_TOLERANCE,
+                search_precision="single"):
     """Solve ``problem`` (double precision) under load or mean gap, first in single.
 
     The single-precision solve runs to ``max(tolerance, SINGLE_TOLERANCE_FLOOR)``
     from the coarse start (or from ``initial_pressure``, a sweep's previous step);
-    the double solve to ``tolerance`` from its pressure.
+    the double solve to ``tolerance`` from its pressure, with its search in
+    ``search_precision``.
     Whatever the single solve ends with (converged or not) is only a start: the
     double solve's verdict is the result's.  The result's iterations, operator
     applications and history are the sums over both solves (the coarse start's
@@ -81,7 +86,8 @@ def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monit
     double = polonsky_keer(problem, control, tolerance=tolerance,
                            max_iterations=max(max_iterations - single_iterations, 1),
                            initial_pressure=pressure, monitor=monitor,
-                           edge_correction=edge_correction, interaction_block=interaction_block)
+                           edge_correction=edge_correction, interaction_block=interaction_block,
+                           search_precision=search_precision)
     del pressure
     double.start = f"{description}; refined in double from its pressure"
     double.iterations += single_iterations

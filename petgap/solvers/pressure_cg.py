@@ -122,6 +122,24 @@ single-precision solve whose residual has not fallen below
 unconverged, with the reason ``"stalled_round_off"`` rather than run on to
 its iteration limit.
 
+On a double grid the two transforms that only find the step -- the
+preconditioner's ``z`` and the direction's image ``r = K^{-1} t`` -- may run in
+single precision (``search_precision="single"``, on the grid's
+:meth:`~petgap.parallel.grid.Grid.single_precision_alias`, in its own
+buffers; a single-precision pair costs 0.7-0.8 of a double one here).  The
+pressure, the displacement ``u = K^{-1} p`` from which every verdict's gap is
+taken, and every sum stay double, so the tolerance and the answer are
+double's; the rounding changes the path only: the direction and step length
+are those of a preconditioner and a line search accurate to about 7 digits,
+and the recurrence's update ``tau r`` carries its rounding (relative to the
+step, not to ``u``; a verdict is always taken on a fresh transform).  The same
+solve on another number of ranks then takes another path within that rounding
+and ends within the tolerance's reach of it, not within round-off
+(``tests/solvers/test_search_precision.py`` measures it), so double is the
+default (:data:`SEARCH_PRECISION`); mixed precision
+(:mod:`petgap.solvers.mixed_precision`), whose single stage depends on the
+decomposition at that level already, refines with a single search.
+
 Convergence is judged at the start of an iteration, on the pair ``(p, g)`` the
 iteration starts from, by the gap residual of
 :meth:`petgap.mechanics.problem.ContactProblem.kkt_residuals` (the pressure residual is
@@ -162,12 +180,16 @@ WITHDRAWN_FACTOR = 0.1
 #: the residual falls by about half per iteration, so the rule never fires there.
 STALL_ITERATIONS = 20
 STALL_FACTOR = 0.9
+#: Precision of the preconditioner's transform and of the direction's image on a
+#: double grid (see "Precision" in the module docstring): double, so that results
+#: depend on the number of ranks by round-off only.
+SEARCH_PRECISION = "double"
 
 
 def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                   initial_pressure=None, monitor=None, preconditioned=True, coarse_start=True,
                   edge_correction=EDGE_CORRECTION, interaction_block=BLOCK,
-                  coarse_tolerance=coarse.COARSE_TOLERANCE):
+                  coarse_tolerance=coarse.COARSE_TOLERANCE, search_precision=SEARCH_PRECISION):
     """Solve non-adhesive contact under load or mean-gap control.
 
     Parameters
@@ -202,6 +224,11 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     coarse_tolerance : float
         The tolerance the coarse start's solves stop at (or ``tolerance`` if
         that is looser; :data:`petgap.solvers.coarse.COARSE_TOLERANCE`).
+    search_precision : {"single", "double"}
+        The precision of the two transforms that find the step -- the
+        preconditioner's and the direction's image -- on a double grid (see
+        "Precision" in the module docstring); a single grid does everything in
+        single.  :data:`SEARCH_PRECISION` by default.
 
     Returns
     -------
@@ -217,6 +244,9 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         raise ValueError(f"interaction_block = {interaction_block!r} is not allowed: the side "
                          f"of the patch interaction's blocks is a whole number of pixels >= 1, "
                          f"or 0 to leave the interaction out")
+    if search_precision not in ("single", "double"):
+        raise ValueError(f"search_precision = {search_precision!r} is not allowed: need "
+                         f"'single' or 'double'")
     if not (isinstance(coarse_tolerance, (int, float, np.floating))
             and 0 < coarse_tolerance < np.inf):
         raise ValueError(f"coarse_tolerance = {coarse_tolerance!r} is not allowed: the tolerance "
@@ -257,6 +287,19 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     else:
         raise TypeError(f"unknown control {control!r}")
 
+    # The search's two transforms in single precision on a double grid ("Precision" in the
+    # module docstring), their inputs and the preconditioner's output on S in `low`, the
+    # direction's image r = K^{-1} t in the real FFT buffer in the search's precision.  The
+    # alias grid is planned here, while the FFT buffers hold nothing (a start goes there next).
+    rounded = search_precision == "single" and dtype == np.float64
+    low = np.empty(0, dtype=np.float32)
+    image = grid.padded
+    if rounded:
+        alias = grid.single_precision_alias()
+        image = alias.padded
+        get_logger("pressure_cg").info("search in single precision: its FFTs planned in %.2f s "
+                                       "(%s, when first made)", alias.planning_time,
+                                       alias.planner)
     start = "warm" if initial_pressure is not None else ""
     if initial_pressure is None and coarse_start:
         initial_pressure, start = coarse_start_pressure(problem, control, tolerance, max_iterations,
@@ -411,7 +454,15 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # z = P_S K P_S g (one pair, from S to S), made zero-mean on S
             # under load control
             zS = contact.z
-            half_space.apply_sparse(pidx, gS, inverse=False, gathered=zS)
+            if rounded:
+                low = _single_pair(low, len(idx))
+                g_low, z_low = low[:len(idx)], low[len(idx):2 * len(idx)]
+                np.copyto(g_low, gS, casting="same_kind")
+                half_space.apply_sparse(pidx, g_low, inverse=False, gathered=z_low,
+                                        precision="single")
+                np.copyto(zS, z_low)
+            else:
+                half_space.apply_sparse(pidx, gS, inverse=False, gathered=zS)
             if edge is None:
                 sum_z, kz, g_sq = global_sums(comm, *_cs.z_sums(zS, gS), g_norm)
                 gz = kz
@@ -466,10 +517,17 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         while True:
             _cs.direction(zS_, zshift_, beta, tS)
             # The image r = K^{-1} t of the direction: one transform pair, from S
-            # to the whole slab (the recurrence below needs r everywhere)
-            half_space.apply_sparse(pidx, tS, inverse=True)
+            # to the whole slab (the recurrence below needs r everywhere), in the
+            # search's precision
+            if rounded:
+                low = _single_pair(low, len(idx))
+                t_low = low[:len(idx)]
+                np.copyto(t_low, tS, casting="same_kind")
+                half_space.apply_sparse(pidx, t_low, inverse=True, precision="single")
+            else:
+                half_space.apply_sparse(pidx, tS, inverse=True)
             sum_r, sum_gt, sum_rt, sum_t = global_sums(comm,
-                                                       *_cs.step_sums(padded, pidx, gS, tS))
+                                                       *_cs.step_sums(image, pidx, gS, tS))
             if sum_gt > 0 or beta == 0.0:
                 break
             # S changed since the last restart, so t need not descend: restart
@@ -496,7 +554,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         # Same contact set, no projection: u follows p linearly, no transform needed.
         fresh = n_overlap > 0 or n_clipped > 0 or since_fresh >= refresh_interval
         if not fresh:
-            _cs.recurrence(u, padded, tau, scale, ny)
+            _cs.recurrence(u, image, tau, scale, ny)
             contact.p[...] *= scale
             scale = 1.0
     # kappa and its mask: freed before the result's fields are made.  The result's pressure
@@ -524,6 +582,13 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         solver="pcg-pressure", iterations=it, wall_time=timer(), history=history,
         operator_applications=problem.operator_applications - start_ops, residuals=residuals,
         start=start, start_time=start_time)
+
+
+def _single_pair(low, n):
+    """``low``, or a larger float32 array when it holds fewer than two vectors of ``n``."""
+    if len(low) >= 2 * n:
+        return low
+    return np.empty(2 * n + n // 4, dtype=np.float32)
 
 
 def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, max_iterations,

@@ -581,21 +581,25 @@ def pressure_solver_options():
     (default :data:`~petgap.solvers.edge_correction.EDGE_CORRECTION`) and
     ``-petgap_interaction_block`` (default
     :data:`~petgap.solvers.patch_interaction.BLOCK`, 0 leaves the patch
-    interaction out), read from PETSc's database as it is: call it inside the
+    interaction out) and ``-petgap_search_precision`` (``single`` or ``double``;
+    only where given, so that each solver keeps its own default), read from PETSc's database as it is: call it inside the
     solve's :class:`petsc_options`.
     """
     db = PETSc.Options()
     return {"coarse_start": db.getBool("petgap_coarse_start", True),
             "coarse_tolerance": db.getReal("petgap_coarse_tolerance", COARSE_TOLERANCE),
             "edge_correction": db.getReal("petgap_edge_correction", EDGE_CORRECTION),
-            "interaction_block": db.getInt("petgap_interaction_block", BLOCK)}
+            "interaction_block": db.getInt("petgap_interaction_block", BLOCK),
+            **({"search_precision": db.getString("petgap_search_precision")}
+               if db.hasName("petgap_search_precision") else {})}
 
 
 # ------------------------------------------------------------- option checking
 #: The PETSc options a petgap run reads, with the kind of value each takes:
 #: ``"int"``, ``"real"``, ``"bool"`` (a bare flag is true), ``"word"`` (any
 #: text, checked elsewhere: ``tao_type``), ``"viewer"`` (an optional viewer
-#: spec such as ``ascii:file.txt``), ``"flag"`` (no value).  PETSc's database
+#: spec such as ``ascii:file.txt``), ``"flag"`` (no value), ``"precision"``
+#: (``single`` or ``double``).  PETSc's database
 #: cannot say which options were read (petsc4py wraps no "used" query, and
 #: petgap pushes and pops its options around every solve), so they are checked
 #: against this list before anything runs: a misspelt name is found before
@@ -616,7 +620,7 @@ KNOWN_OPTIONS = {
     # petgap's own
     "petgap_coarse_start": "bool", "petgap_coarse_tolerance": "real",
     "petgap_edge_correction": "real",
-    "petgap_interaction_block": "int",
+    "petgap_interaction_block": "int", "petgap_search_precision": "precision",
     # PETSc at large (profiling, debugging), read at initialisation or finalisation
     "log_view": "viewer", "log_view_memory": "bool", "log_all": "bool", "log_trace": "viewer",
     "log_exclude": "word", "options_left": "bool", "options_view": "viewer",
@@ -676,6 +680,8 @@ def option_problem(name, value):
         return "is not a boolean", "true or false (yes/no, on/off, 1/0), or no value (true)"
     if kind == "flag" and text:
         return "takes no value", "the bare option"
+    if kind == "precision" and text not in ("single", "double"):
+        return "is not a precision", "single or double"
     return None
 
 

@@ -132,3 +132,39 @@ def test_a_single_topography_is_not_copied_to_double(comm):
     assert s32.mean == pytest.approx(s64.mean, abs=1e-7)
     assert s32.rms_height == pytest.approx(s64.rms_height, rel=1e-6)
     assert s32.rms_slope == pytest.approx(s64.rms_slope, rel=1e-6)
+
+
+def test_the_single_precision_alias_transforms_in_the_double_grids_buffers(comm):
+    """The alias is a single grid of the same decomposition on the first half of the double
+    grid's bytes: no buffers of its own, made once, the same numbers as a single grid's;
+    the half-space applies it when asked for single precision, counted as an application."""
+    double, single = grids(comm, (45, 38), size=(2.0, 3.5))
+    alias = double.single_precision_alias()
+    assert alias is double.single_precision_alias() and single.single_precision_alias() is single
+    assert alias.precision == "single" and alias.local_shape == double.local_shape
+    assert alias.x_slice == double.x_slice and alias.ky_slice == double.ky_slice
+    for mine, theirs in ((alias.padded, double.padded), (alias.fourier, double.fourier)):
+        assert np.shares_memory(mine, theirs)
+        assert mine.__array_interface__["data"][0] == theirs.__array_interface__["data"][0]
+    assert alias._real_storage.nbytes * 2 == double._real_storage.nbytes
+    rng = np.random.default_rng(8 + comm.rank)
+    width, rows = double.padded.shape[1], double.local_shape[0]
+    flat = np.sort(rng.choice(rows * 38, size=rows * 38 // 5, replace=False))
+    pidx = (flat // 38 * width + flat % 38).astype(np.int32)
+    values = rng.standard_normal(len(pidx)).astype(np.float32)
+    scale = 2.0 / double.npoints
+    want, got = np.empty(len(pidx), np.float32), np.empty(len(pidx), np.float32)
+    single.convolve_qpower_sparse(pidx, values, scale, -1, gathered=want)
+    alias.convolve_qpower_sparse(pidx, values, scale, -1, gathered=got)
+    np.testing.assert_array_equal(got, want)
+    half_space = ElasticHalfSpace(double, 2.0)
+    exact = np.empty(len(pidx))
+    half_space.apply_sparse(pidx, values.astype(np.float64), inverse=True, gathered=exact)
+    before = half_space.applications
+    half_space.apply_sparse(pidx, values, inverse=True, gathered=got, precision="single")
+    assert half_space.applications == before + 1
+    assert rel_max(comm, got, exact) < 50 * EPS * np.log2(double.npoints)
+    half_space.apply_sparse(pidx, values, inverse=True, precision="single")   # to alias.real
+    np.testing.assert_array_equal(alias.padded.ravel()[pidx], got)
+    with pytest.raises(ValueError, match="precision = 'half' is not allowed"):
+        half_space.apply_sparse(pidx, values, precision="half", gathered=got)

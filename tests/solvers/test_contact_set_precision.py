@@ -303,6 +303,11 @@ def test_double_precision_matches_numpy():
     assert gmax == np.abs(hbar - h).max() and norm == pytest.approx(((hbar - h) ** 2).sum())
 
 
+#: The one mix of precisions a kernel takes: a float32 image of the direction (its argument
+#: at this position) beside double fields, in a double solve with a single-precision search.
+SINGLE_IMAGE = {"step_sums": 0, "recurrence": 1}
+
+
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_mixed_precision_is_refused(name):
     """One float64 field among float32 ones is a TypeError naming the precisions
@@ -317,8 +322,34 @@ def test_mixed_precision_is_refused(name):
     for keep in fields:                               # each field in turn left in float64
         mixed = [a.astype(np.float32) if _is_field(a) and k != keep else _copy(a)
                  for k, a in enumerate(args)]
+        if [k for k in fields if k != keep] == [SINGLE_IMAGE.get(name)]:
+            continue                                  # the single image: taken (below)
         with pytest.raises(TypeError, match=f"{name}: .*all float64 or all float32.*float64"):
             getattr(cs, name)(*mixed)
+
+
+@pytest.mark.parametrize("name", sorted(SINGLE_IMAGE))
+def test_a_single_image_beside_double_fields(name):
+    """A float32 image of the direction is read as it is and combined in double: the
+    result is the all-double kernel's on the image rounded to float32.  Its other fields
+    in float32 are still refused."""
+    args = CASES[name](_rng(4))
+    at = SINGLE_IMAGE[name]
+    rounded = [a.astype(np.float32).astype(np.float64) if k == at else _copy(a)
+               for k, a in enumerate(args)]
+    single = [a.astype(np.float32) if k == at else _copy(a) for k, a in enumerate(args)]
+    want = getattr(cs, name)(*rounded)
+    got = getattr(cs, name)(*single)
+    if name == "step_sums":
+        np.testing.assert_allclose(got, want, rtol=1e-13)
+    else:
+        np.testing.assert_allclose(single[0], rounded[0], rtol=1e-13, atol=1e-15)
+        assert single[0].dtype == np.float64
+    if name == "step_sums":                           # tS in float32 too: refused
+        others = [_copy(a) for a in single]
+        others[3] = others[3].astype(np.float32)
+        with pytest.raises(TypeError, match="step_sums: .*all float64 or all float32"):
+            cs.step_sums(*others)
 
 
 def test_contact_set_in_single_precision():
