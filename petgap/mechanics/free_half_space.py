@@ -120,6 +120,9 @@ class FreeHalfSpace:
     """
 
     periodic = False
+    #: ``C`` is applied in the map's precision (``apply_sparse``): a whole-slab result
+    #: stays in ``grid.real``, in double.
+    transforms_in_single = False
 
     def __init__(self, grid, contact_modulus=1.0):
         self._periodic = ElasticHalfSpace(grid, contact_modulus)
@@ -233,6 +236,9 @@ class PaddedCellHalfSpace:
     """
 
     periodic = True
+    #: ``apply_sparse`` works in the cell's precision: a whole-slab result stays in
+    #: ``grid.real``.
+    transforms_in_single = False
 
     def __init__(self, cell, contact_modulus=1.0):
         contact_modulus = float(contact_modulus)

@@ -48,6 +48,9 @@ class ElasticHalfSpace:
     #: Periodic images load the cell (:class:`petgap.mechanics.free_half_space.FreeHalfSpace`
     #: is the body without them).
     periodic = True
+    #: ``apply_sparse(..., precision="single")`` transforms in 32 bits, its whole-slab
+    #: result in the grid's :meth:`~petgap.parallel.grid.Grid.single_precision_alias`.
+    transforms_in_single = True
 
     def __init__(self, grid, contact_modulus=1.0):
         contact_modulus = float(contact_modulus)

@@ -126,7 +126,7 @@ On a double grid the two transforms that only find the step -- the
 preconditioner's ``z`` and the direction's image ``r = K^{-1} t`` -- may run in
 single precision (``search_precision="single"``, on the grid's
 :meth:`~petgap.parallel.grid.Grid.single_precision_alias`, in its own
-buffers; a single-precision pair costs 0.7-0.8 of a double one here).  The
+buffers, at the price of a single-precision pair).  The
 pressure, the displacement ``u = K^{-1} p`` from which every verdict's gap is
 taken, and every sum stay double, so the tolerance and the answer are
 double's; the rounding changes the path only: the direction and step length
@@ -293,10 +293,13 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     # alias grid is planned here, while the FFT buffers hold nothing (a start goes there next).
     rounded = search_precision == "single" and dtype == np.float64
     low = np.empty(0, dtype=np.float32)
+    # (a free boundary's compliance is applied in double: its image stays double)
+    single_image = rounded and problem.half_space.transforms_in_single
     image = grid.padded
     if rounded:
         alias = grid.single_precision_alias()
-        image = alias.padded
+        if single_image:
+            image = alias.padded
         get_logger("pressure_cg").info("search in single precision: its FFTs planned in %.2f s "
                                        "(%s, when first made)", alias.planning_time,
                                        alias.planner)
@@ -519,7 +522,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # The image r = K^{-1} t of the direction: one transform pair, from S
             # to the whole slab (the recurrence below needs r everywhere), in the
             # search's precision
-            if rounded:
+            if single_image:
                 low = _single_pair(low, len(idx))
                 t_low = low[:len(idx)]
                 np.copyto(t_low, tS, casting="same_kind")

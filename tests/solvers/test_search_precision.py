@@ -82,3 +82,21 @@ def test_the_option_reaches_the_solver_and_is_checked(comm):
     with pytest.raises(ValueError, match="search_precision = 'half' is not allowed: need "
                                          "'single' or 'double'"):
         polonsky_keer(problem, Load(0.004), search_precision="half")
+
+
+def test_a_single_search_on_a_free_boundary(comm):
+    """The free compliance is applied in double (its image stays double, no 32-bit slab to
+    read it from); the preconditioner, the periodic stiffness, runs in single: Hertz's
+    contact to the same answer as the double search."""
+    from petgap.mechanics.free_half_space import FreeHalfSpace
+    from petgap.mechanics.problem import Indentation
+    from petgap.surfaces.indenters import indenter
+    grid = Grid((96, 96), comm=comm, planner="estimate", wisdom=False)
+    problem = ContactProblem(grid, indenter(grid, "paraboloid", 400.0), FreeHalfSpace(grid, 1.0))
+    assert not problem.half_space.transforms_in_single
+    control = Indentation(24.0 ** 2 / 400.0)
+    ref = polonsky_keer(problem, control, tolerance=1e-9)
+    sol = polonsky_keer(problem, control, tolerance=1e-9, search_precision="single")
+    assert ref.converged and sol.converged and contact_difference(comm, sol, ref) == 0
+    assert largest(comm, sol.pressure - ref.pressure) <= 1e-8 * largest(comm, ref.pressure)
+    assert sol.mean_pressure == pytest.approx(ref.mean_pressure, rel=1e-9)
