@@ -49,6 +49,10 @@ Each kernel is therefore a ``def`` that checks the precision of its fields and
 calls one of the two specialisations of a ``cdef`` implementation, which takes
 the fields as objects and views them as typed (``const``) memoryviews locally;
 its first argument (``real_t kind``, a zero) only selects the specialisation.
+The two kernels that read the image of the search direction (:func:`step_sums`,
+:func:`recurrence`) take a second one (``image_t``) for the image's precision,
+which may be single beside double fields (a double solve's single-precision
+search).
 """
 import numpy as np
 
@@ -57,6 +61,10 @@ from libc.string cimport memset
 ctypedef int index_t  # numpy.int32: flat indices into one rank's (padded) slab
 
 ctypedef fused real_t:  # the precision of the fields of one call
+    float
+    double
+
+ctypedef fused image_t:  # a direction's image: the fields' precision, or float beside double
     float
     double
 
@@ -300,10 +308,10 @@ def step_sums(pad, const index_t[::1] pidx, gS, tS):
     imaged in single precision (:func:`petgap.solvers.pressure_cg.polonsky_keer`).
     """
     if _mixed(pad, gS) and tS.dtype == _FLOAT64:
-        return _step_sums_mixed(pad, pidx, gS, tS)
+        return _step_sums[double, float](0, 0, pad, pidx, gS, tS)
     if _single("step_sums", "pad gS tS", (pad, gS, tS)):
-        return _step_sums[float](0, pad, pidx, gS, tS)
-    return _step_sums[double](0, pad, pidx, gS, tS)
+        return _step_sums[float, float](0, 0, pad, pidx, gS, tS)
+    return _step_sums[double, double](0, 0, pad, pidx, gS, tS)
 
 
 cdef bint _mixed(pad, field):
@@ -311,35 +319,14 @@ cdef bint _mixed(pad, field):
     return pad.dtype == _FLOAT32 and field.dtype == _FLOAT64
 
 
-cdef object _step_sums_mixed(const float[:, ::1] pad, const index_t[::1] pidx,
-                             const double[::1] gS, const double[::1] tS):
-    cdef Py_ssize_t k, ns = pidx.shape[0]
-    cdef double r, t, sr = 0.0, sgt = 0.0, srt = 0.0, st = 0.0
-    cdef const float *pf
-    if ns == 0:
-        return 0.0, 0.0, 0.0, 0.0
-    if gS.shape[0] < ns or tS.shape[0] < ns:
-        raise ValueError("step_sums: gS and tS are shorter than pidx")
-    pf = &pad[0, 0]
-    with nogil:
-        for k in range(ns):
-            r = pf[pidx[k]]
-            t = tS[k]
-            sr += r
-            sgt += gS[k] * t
-            srt += r * t
-            st += t
-    return sr, sgt, srt, st
-
-
-cdef object _step_sums(real_t kind, object pad_, const index_t[::1] pidx, object gS_,
-                       object tS_):
-    cdef const real_t[:, ::1] pad = pad_
+cdef object _step_sums(real_t kind, image_t image_kind, object pad_, const index_t[::1] pidx,
+                       object gS_, object tS_):
+    cdef const image_t[:, ::1] pad = pad_
     cdef const real_t[::1] gS = gS_
     cdef const real_t[::1] tS = tS_
     cdef Py_ssize_t k, ns = pidx.shape[0]
     cdef double r, t, sr = 0.0, sgt = 0.0, srt = 0.0, st = 0.0
-    cdef const real_t *pf
+    cdef const image_t *pf
     if ns == 0:
         return 0.0, 0.0, 0.0, 0.0
     pf = &pad[0, 0]
@@ -519,35 +506,20 @@ def recurrence(u, pad, double tau, double scale, Py_ssize_t columns):
     precision: its rounding enters the step ``tau r``, not ``u``).
     """
     if _mixed(pad, u):
-        _recurrence_mixed(u, pad, tau, scale, columns)
+        _recurrence[double, float](0, 0, u, pad, tau, scale, columns)
     elif _single("recurrence", "u pad", (u, pad)):
-        _recurrence[float](0, u, pad, tau, scale, columns)
+        _recurrence[float, float](0, 0, u, pad, tau, scale, columns)
     else:
-        _recurrence[double](0, u, pad, tau, scale, columns)
+        _recurrence[double, double](0, 0, u, pad, tau, scale, columns)
 
 
-cdef object _recurrence_mixed(double[:, ::1] u, const float[:, ::1] pad, double tau,
-                             double scale, Py_ssize_t columns):
-    cdef Py_ssize_t i, j, m = u.shape[0]
-    cdef double *ur
-    cdef const float *rr
-    if pad.shape[0] != m or columns > u.shape[1] or columns > pad.shape[1]:
-        raise ValueError("recurrence: u and pad do not describe the same slab")
-    with nogil:
-        for i in range(m):
-            ur = &u[i, 0]
-            rr = &pad[i, 0]
-            for j in range(columns):
-                ur[j] = scale * (ur[j] - tau * <double>rr[j])
-
-
-cdef object _recurrence(real_t kind, object u_, object pad_, double tau, double scale,
-                        Py_ssize_t columns):
+cdef object _recurrence(real_t kind, image_t image_kind, object u_, object pad_, double tau,
+                        double scale, Py_ssize_t columns):
     cdef real_t[:, ::1] u = u_
-    cdef const real_t[:, ::1] pad = pad_
+    cdef const image_t[:, ::1] pad = pad_
     cdef Py_ssize_t i, j, m = u.shape[0]
     cdef real_t *ur
-    cdef const real_t *rr
+    cdef const image_t *rr
     if pad.shape[0] != m or columns > u.shape[1] or columns > pad.shape[1]:
         raise ValueError("recurrence: u and pad do not describe the same slab")
     with nogil:
