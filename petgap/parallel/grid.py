@@ -29,6 +29,7 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.parallel import _fftw_mpi, _fftw_mpi_single
+from petgap.parallel.log import get_logger
 
 #: Where FFTW wisdom is cached between runs (override with PETGAP_WISDOM_DIR).
 WISDOM_DIR_ENV = "PETGAP_WISDOM_DIR"
@@ -306,6 +307,10 @@ class Grid:
             self._alias = Grid(self.shape, size=(self.Lx, self.Ly), comm=self.comm,
                                planner=self.planner, wisdom=self.wisdom, precision="single",
                                _buffers_of=self)
+            # what a first run of this size spends planning it, in the log
+            get_logger("grid").info("single-precision alias of the %dx%d grid: FFTs planned in "
+                                    "%.2f s (%s)", self.nx, self.ny, self._alias.planning_time,
+                                    self.planner)
         return self._alias
 
     def backward(self):

@@ -300,9 +300,6 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         alias = grid.single_precision_alias()
         if single_image:
             image = alias.padded
-        get_logger("pressure_cg").info("search in single precision: its FFTs planned in %.2f s "
-                                       "(%s, when first made)", alias.planning_time,
-                                       alias.planner)
     start = "warm" if initial_pressure is not None else ""
     if initial_pressure is None and coarse_start:
         initial_pressure, start = coarse_start_pressure(problem, control, tolerance, max_iterations,
