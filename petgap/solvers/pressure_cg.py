@@ -313,8 +313,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     # The contact set S = {p > 0} as sorted index lists, with p and the
     # conjugate direction t stored on S only (see petgap/solvers/contact_set.py).
     mask = np.zeros(grid.local_shape, dtype=np.uint8)
-    padded = grid.padded
-    padded_width = padded.shape[1]
+    padded_width = grid.padded.shape[1]
     # g = u - h + offset; periodic u has zero mean, so a mean gap fixes the offset
     offset = (0.0 if load else problem.mean_height + target if periodic
               else problem.top_height - target)
@@ -455,9 +454,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # under load control
             zS = contact.z
             if rounded:
-                low = _single_pair(low, len(idx))
-                g_low, z_low = low[:len(idx)], low[len(idx):2 * len(idx)]
-                np.copyto(g_low, gS, casting="same_kind")
+                low, g_low, z_low = _in_single(low, gS)
                 half_space.apply_sparse(pidx, g_low, inverse=False, gathered=z_low,
                                         precision="single")
                 np.copyto(zS, z_low)
@@ -520,9 +517,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             # to the whole slab (the recurrence below needs r everywhere), in the
             # search's precision
             if single_image:
-                low = _single_pair(low, len(idx))
-                t_low = low[:len(idx)]
-                np.copyto(t_low, tS, casting="same_kind")
+                low, t_low, _ = _in_single(low, tS)
                 half_space.apply_sparse(pidx, t_low, inverse=True, precision="single")
             else:
                 half_space.apply_sparse(pidx, tS, inverse=True)
@@ -584,11 +579,18 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         start=start, start_time=start_time)
 
 
-def _single_pair(low, n):
-    """``low``, or a larger float32 array when it holds fewer than two vectors of ``n``."""
-    if len(low) >= 2 * n:
-        return low
-    return np.empty(2 * n + n // 4, dtype=np.float32)
+def _in_single(low, values):
+    """``values`` rounded to float32 in ``low``, and a float32 vector as long beside them.
+
+    Returns ``(low, rounded, spare)``; ``low`` is replaced by a larger array when
+    it holds fewer than two such vectors (the spare takes a gathered result).
+    """
+    n = len(values)
+    if len(low) < 2 * n:
+        low = np.empty(2 * n + n // 4, dtype=np.float32)
+    rounded, spare = low[:n], low[n:2 * n]
+    np.copyto(rounded, values, casting="same_kind")
+    return low, rounded, spare
 
 
 def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, max_iterations,

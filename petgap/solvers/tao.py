@@ -582,8 +582,8 @@ def pressure_solver_options():
     ``-petgap_interaction_block`` (default
     :data:`~petgap.solvers.patch_interaction.BLOCK`, 0 leaves the patch
     interaction out) and ``-petgap_search_precision`` (``single`` or ``double``;
-    only where given, so that each solver keeps its own default), read from PETSc's database as it is: call it inside the
-    solve's :class:`petsc_options`.
+    only where given, so that each solver keeps its own default), read from
+    PETSc's database as it is: call it inside the solve's :class:`petsc_options`.
     """
     db = PETSc.Options()
     return {"coarse_start": db.getBool("petgap_coarse_start", True),
