@@ -415,7 +415,7 @@ def _duration(seconds):
 
 def _log_solution(log, step, solution):
     status = "converged" if solution.converged else f"NOT converged ({solution.reason})"
-    log.info("  step %d %s after %d iterations (%d FFT pairs, %.2f s): c = %.5g, mean gap = %.6g, "
+    log.info("  step %d %s after %d iterations (%g FFT pairs, %.2f s): c = %.5g, mean gap = %.6g, "
              "mean pressure = %.6g, KKT = %.2e/%.2e%s", step.index, status, solution.iterations,
              solution.operator_applications, solution.wall_time, solution.contact_fraction,
              solution.mean_gap, solution.mean_pressure, solution.kkt_pressure, solution.kkt_gap,

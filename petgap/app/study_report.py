@@ -92,7 +92,7 @@ def write_outputs(study, output_dir, argv=None):
                "wall_time": "solver wall time, s (slowest rank; summed over the solves of a "
                             "rung)",
                "setup_time": "grid (FFT planning), surface and problem, s",
-               "fft_pairs": "elastic operator applications (one forward + one inverse FFT each)",
+               "fft_pairs": "elastic operator applications in transform pairs (one forward + one inverse FFT each)",
                "bytes_per_point": "peak resident memory of grid + surface + problem + solve "
                                   "above the resident memory before them, summed over ranks, "
                                   "over nx ny",
@@ -200,7 +200,7 @@ def format_table(study):
                             for q in study.quantities)
             lines.append(f"{r['rung']:>9} {str(r['nx']) + 'x' + str(r['ny']):>11} "
                          f"{'yes' if r['converged'] else 'NO':>4} {r['iterations']:>5d} "
-                         f"{r['fft_pairs']:>6d} {r['wall_time']:>8.2f} "
+                         f"{r['fft_pairs']:>6g} {r['wall_time']:>8.2f} "
                          f"{_fmt(r['bytes_per_point'], '.0f'):>6} {errs}")
         lines.append("")
     for note in study.notes:

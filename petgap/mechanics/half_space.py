@@ -25,13 +25,14 @@ and the grid's FFT buffers are used as scratch.
 The half-space counts its own applications of ``K`` or ``K^{-1}``
 (:attr:`ElasticHalfSpace.applications`; the energies, a forward transform
 each, are not applications) and runs each inside the PETSc log event
-:data:`petgap.parallel.log.OPERATOR_EVENT`, so that solvers report the count
+:data:`petgap.parallel.log.OPERATOR_EVENT` (a half run apart inside
+:data:`~petgap.parallel.log.OPERATOR_HALF_EVENT`), so that solvers report the count
 without keeping it themselves and ``-log_view`` shows the operator's time.
 """
 import numpy as np
 
 from petgap.parallel.grid import weighted_power
-from petgap.parallel.log import OPERATOR_EVENT, event
+from petgap.parallel.log import OPERATOR_EVENT, OPERATOR_HALF_EVENT, event
 
 
 class ElasticHalfSpace:
@@ -51,6 +52,8 @@ class ElasticHalfSpace:
     #: ``apply_sparse(..., precision="single")`` transforms in 32 bits, its whole-slab
     #: result in the grid's :meth:`~petgap.parallel.grid.Grid.single_precision_alias`.
     transforms_in_single = True
+    #: :meth:`begin_image` gives ``(t, K^{-1} t)`` for half a transform pair.
+    splits_image = True
 
     def __init__(self, grid, contact_modulus=1.0):
         contact_modulus = float(contact_modulus)
@@ -71,7 +74,8 @@ class ElasticHalfSpace:
 
     @property
     def applications(self):
-        """Applications of ``K`` or ``K^{-1}`` (dense or sparse) so far, on this rank.
+        """Applications of ``K`` or ``K^{-1}`` (dense or sparse) so far, on this rank, in
+        transform pairs (:meth:`begin_image` and :meth:`end_image` count a half each).
 
         Every rank applies the operator together, so the count is the same on
         all; a solver reports its difference over the solve.
@@ -120,15 +124,45 @@ class ElasticHalfSpace:
         ``grid.real``'s bytes).  It counts as an application like any other.
         """
         scale, power = (self._compliance, -1) if inverse else (self._stiffness, 1)
-        grid = self.grid
-        if precision == "single":
-            grid = grid.single_precision_alias()
-        elif precision not in (None, grid.precision):
-            raise ValueError(f"precision = {precision!r} is not allowed: need 'single', or "
-                             f"the grid's own {grid.precision!r}")
+        grid = self._grid_in(precision)
         self._applications += 1
         with event(OPERATOR_EVENT):
             grid.convolve_qpower_sparse(pidx, values, scale, power, out, gathered)
+
+    def begin_image(self, pidx, values, precision=None):
+        """This rank's part of ``(t, K^{-1} t)`` for a field ``t`` on a set of points, by
+        Parseval, with ``K^{-1} t`` left half-made.
+
+        ``t`` is ``values`` at the sorted padded-slab indices ``pidx`` (as in
+        :meth:`apply_sparse`).  The form needs the forward transform only:
+        summed over the ranks it is ``sum_x t K^{-1} t`` exactly, and a
+        conjugate-gradient step length needs no more.  :meth:`end_image`
+        completes ``K^{-1} t`` (the inverse transform) if the solver needs
+        the field after all; any other transform in between discards it.  Each
+        half counts half an application.  ``precision`` as in :meth:`apply_sparse`.
+        """
+        grid = self._grid_in(precision)
+        self._applications += 0.5
+        with event(OPERATOR_HALF_EVENT):
+            return grid.convolve_qpower_sparse_begin(pidx, values, self._compliance, -1)
+
+    def end_image(self, precision=None):
+        """``K^{-1} t`` of the last :meth:`begin_image`, into the FFT buffer (``grid.padded``,
+        or the single-precision alias's with ``precision="single"``).  Collective."""
+        grid = self._grid_in(precision)
+        self._applications += 0.5
+        with event(OPERATOR_HALF_EVENT):
+            grid.convolve_qpower_end()
+
+    def _grid_in(self, precision):
+        """The grid whose transforms run in ``precision`` (None: the grid's own)."""
+        grid = self.grid
+        if precision == "single":
+            return grid.single_precision_alias()
+        if precision not in (None, grid.precision):
+            raise ValueError(f"precision = {precision!r} is not allowed: need 'single', or "
+                             f"the grid's own {grid.precision!r}")
+        return grid
 
     def pressure(self, displacement, out=None):
         """Zero-mean pressure ``p = K u`` that holds the displacement ``u``.

@@ -110,7 +110,9 @@ class ContactSolution:
     whenever the tolerance was not met (for instance at the iteration limit);
     ``reason`` then says why the solver stopped.  ``precision`` is the floating
     point the solve ran in: ``"double"``, ``"single"`` (the grid's; the fields are
-    then 32-bit) or ``"mixed"`` (single, refined in double).
+    then 32-bit) or ``"mixed"`` (single, refined in double).  ``operator_applications``
+    counts the elastic operator's applications in transform pairs (a step length
+    that needs only the forward half of one counts a half).
     """
 
     gap: np.ndarray
@@ -133,7 +135,7 @@ class ContactSolution:
     reason: str
     solver: str
     iterations: int
-    operator_applications: int
+    operator_applications: float
     wall_time: float
     history: list = field(default_factory=list, repr=False)
     direction: str = "start"
@@ -368,7 +370,7 @@ class ContactProblem:
             attractive_fraction=total[6] / n, inv_kappa_att=inv_kappa_att,
             kkt_pressure=kkt_p, kkt_gap=kkt_g, converged=bool(converged), reason=str(reason),
             solver=solver, iterations=int(iterations),
-            operator_applications=int(operator_applications), wall_time=float(wall_time),
+            operator_applications=float(operator_applications), wall_time=float(wall_time),
             history=list(history), start=str(start), start_time=float(start_time),
             precision=grid.precision)
 

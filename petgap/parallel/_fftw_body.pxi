@@ -167,6 +167,14 @@ cdef inline int _block(Py_ssize_t start, Py_ssize_t rows, Py_ssize_t full,
     return 0 if m[0] == full else 1
 
 
+cdef inline double _scale_mode(real_t *s, double f) noexcept nogil:
+    """The complex value at ``s`` times ``f``; returns ``f |value|^2`` of the value before."""
+    cdef double re = s[0], im = s[1]
+    s[0] = <real_t>(re * f)
+    s[1] = <real_t>(im * f)
+    return f * (re * re + im * im)
+
+
 cdef class ConvolutionPlans:
     """``x <- F^{-1} [scale |q|^power F x]`` in the padded real slab, in one sweep.
 
@@ -210,8 +218,11 @@ cdef class ConvolutionPlans:
     cdef Py_ssize_t n0, ln0, ln1, nky
     cdef int block_rows[2], block_lines[2]   # rows of the plans [0] and [1] (_block_sizes)
     cdef object comm, real, fourier
+    #: True between :meth:`begin_sparse` and :meth:`end`; every other transform clears it
+    cdef public bint half_made
 
     def __cinit__(self):
+        self.half_made = False
         self.rows_fwd = self.rows_bwd = NULL
         self.transpose_fwd = self.transpose_bwd = NULL
         self.lines_fwd[0] = self.lines_fwd[1] = NULL
@@ -295,6 +306,38 @@ cdef class ConvolutionPlans:
             raise ValueError("power must be +1 or -1")
         return 0
 
+    cdef double _multiply(self, Py_ssize_t j0, Py_ssize_t m, const double *qx,
+                          const double *qy, double scale, int power,
+                          const double *wrow) noexcept nogil:
+        """Rows ``j0 .. j0 + m`` of the transposed slab times ``scale |q|^power``, q = 0 zeroed.
+
+        With ``wrow`` (the Hermitian multiplicity of each row), also returns
+        ``sum_j wrow[j] sum_i scale |q|^power |c_ji|^2`` of the rows as they were,
+        accumulated in double: by Parseval the form ``(x, F^{-1} f F x)`` of the
+        field these rows came from (the caller's ``scale`` carries ``1 / (n0 n1)``).
+        """
+        cdef Py_ssize_t i, j, n0 = self.n0
+        cdef double qyj, q2, row, total = 0.0
+        cdef real_t *s
+        for j in range(j0, j0 + m):
+            s = <real_t *>((<fftw_complex *>self.real_data) + j * n0)
+            qyj = qy[j] * qy[j]
+            row = 0.0
+            if power == 1:
+                for i in range(n0):   # f = 0 at q = 0
+                    row = row + _scale_mode(s + 2 * i, scale * sqrt(qx[i] * qx[i] + qyj))
+            else:
+                for i in range(n0):
+                    q2 = qx[i] * qx[i] + qyj
+                    if q2 > 0.0:
+                        row = row + _scale_mode(s + 2 * i, scale / sqrt(q2))
+                    else:
+                        s[2 * i] = 0.0
+                        s[2 * i + 1] = 0.0
+            if wrow != NULL:
+                total = total + wrow[j] * row
+        return total
+
     cdef void _middle(self, const double *qx, const double *qy, double scale,
                       int power) noexcept nogil:
         """Fourier rows -> (transpose, 1D transforms and multiplier, transpose) -> Fourier rows.
@@ -302,35 +345,16 @@ cdef class ConvolutionPlans:
         The rows of the transposed slab are transformed in place, BLOCK_ROWS
         at a time (in cache), multiplied, and transformed back.
         """
-        cdef Py_ssize_t i, j, j0, m, n0 = self.n0
-        cdef double qyj, f
-        cdef real_t *s
+        cdef Py_ssize_t j0, m
         cdef fftw_complex *rows
         cdef int which
         fftw_execute(self.transpose_fwd)
         j0 = 0
         while j0 < self.ln1:
             which = _block(j0, self.ln1, self.block_lines[0], &m)
-            rows = (<fftw_complex *>self.real_data) + j0 * n0
+            rows = (<fftw_complex *>self.real_data) + j0 * self.n0
             fftw_execute_dft(self.lines_fwd[which], rows, rows)
-            for j in range(j0, j0 + m):
-                s = <real_t *>((<fftw_complex *>self.real_data) + j * n0)
-                qyj = qy[j] * qy[j]
-                if power == 1:
-                    for i in range(n0):
-                        f = scale * sqrt(qx[i] * qx[i] + qyj)
-                        s[2 * i] = s[2 * i] * f
-                        s[2 * i + 1] = s[2 * i + 1] * f
-                else:
-                    for i in range(n0):
-                        f = scale / sqrt(qx[i] * qx[i] + qyj)
-                        s[2 * i] = s[2 * i] * f
-                        s[2 * i + 1] = s[2 * i + 1] * f
-                if qyj == 0.0:
-                    for i in range(n0):
-                        if qx[i] == 0.0:
-                            s[2 * i] = 0.0
-                            s[2 * i + 1] = 0.0
+            self._multiply(j0, m, qx, qy, scale, power, NULL)
             fftw_execute_dft(self.lines_bwd[which], rows, rows)
             j0 += BLOCK_ROWS
         fftw_execute(self.transpose_bwd)
@@ -338,6 +362,7 @@ cdef class ConvolutionPlans:
     def apply(self, const double[::1] qx, const double[::1] qy, double scale, int power):
         """Multiply by ``scale |q|^power`` (``power`` +1 or -1) between the transforms."""
         self._check_multiplier(qx, qy, power)
+        self.half_made = False
         with nogil:
             fftw_execute(self.rows_fwd)
             self._middle(&qx[0], &qy[0], scale, power)
@@ -375,39 +400,19 @@ cdef class ConvolutionPlans:
         cdef Py_ssize_t ns = pidx.shape[0], pw = 2 * self.nky, ln0 = self.ln0
         cdef Py_ssize_t i0, k, m, base, end
         cdef int which
-        cdef real_t *target = self.real_data
+        cdef real_t *target = NULL
         cdef real_t *g = NULL
-        cdef bint ok = True
+        cdef bint ok
         cdef bint gather = gathered is not None
         if values.shape[0] != ns or (gather and gathered.shape[0] != ns):
             raise ValueError("pidx, values and gathered must have the same length")
-        if out is not None:
-            if out.shape[0] != ln0 or out.shape[1] != pw:
-                raise ValueError(f"out has shape {tuple(out.shape)[:2]}, the padded slab is "
-                                 f"({ln0}, {pw})")
-            target = &out[0, 0]
-            if fftw_alignment_of(target) != fftw_alignment_of(self.real_data):
-                raise ValueError("out is not aligned like the real FFT buffer")
+        if not gather:
+            target = self._target(out)
         if gather and ns > 0:
             g = &gathered[0]
+        self.half_made = False
         with nogil:
-            k = 0
-            i0 = 0
-            while i0 < ln0:
-                which = _block(i0, ln0, self.block_rows[0], &m)
-                base = i0 * pw
-                end = base + m * pw
-                memset(self.block, 0, m * pw * sizeof(real_t))
-                while k < ns and pidx[k] < end:
-                    if pidx[k] < base:
-                        ok = False  # unsorted or negative: reported below
-                        break
-                    self.block[pidx[k] - base] = values[k]
-                    k += 1
-                fftw_execute_dft_r2c(self.block_fwd[which], self.block,
-                                     self.fourier_data + i0 * self.nky)
-                i0 += BLOCK_ROWS
-            ok = ok and k == ns
+            ok = self._assemble_rows(pidx, values)
             # The middle stage is collective (the transposes): every rank runs
             # it, valid input or not, so that a bad index list raises on its
             # rank instead of leaving the others waiting in a transpose.
@@ -429,6 +434,111 @@ cdef class ConvolutionPlans:
                     i0 += BLOCK_ROWS
         if not ok:
             raise ValueError("pidx must be sorted ascending and inside this rank's padded slab")
+
+    def begin_sparse(self, const index_t[::1] pidx, const real_t[::1] values,
+                     const double[::1] qx, const double[::1] qy, const double[::1] wrow,
+                     double scale, int power):
+        """The first half of :meth:`apply_sparse`, and the form ``(x, F^{-1} f F x)`` on the way.
+
+        Transforms the field ``x`` given at ``pidx`` forward and multiplies it
+        by ``f = scale |q|^power``, leaving ``f F x`` in the transposed slab (in
+        the real buffer) for :meth:`end` to transform back.  Returns this
+        rank's part of ``sum_q f |F x|^2`` over the full plane (``wrow``: the
+        Hermitian multiplicity of each local Fourier row), accumulated in
+        double: summed over the ranks, ``(x, F^{-1} f F x)`` by Parseval, so that
+        a solver needing only that product -- a step length -- pays half a
+        transform pair for it, and the other half only if it needs the field.
+        Any other use of the buffers in between loses the half-made field
+        (:meth:`end` then refuses).
+        """
+        self._check_multiplier(qx, qy, power)
+        if values.shape[0] != pidx.shape[0]:
+            raise ValueError("pidx and values must have the same length")
+        if wrow.shape[0] != self.ln1:
+            raise ValueError("wrow does not match the Fourier slab")
+        cdef Py_ssize_t j0, m
+        cdef fftw_complex *rows
+        cdef int which
+        cdef double total = 0.0
+        cdef bint ok
+        with nogil:
+            ok = self._assemble_rows(pidx, values)
+            # collective from here (the transpose): every rank runs it, as in apply_sparse
+            fftw_execute(self.transpose_fwd)
+            j0 = 0
+            while j0 < self.ln1:
+                which = _block(j0, self.ln1, self.block_lines[0], &m)
+                rows = (<fftw_complex *>self.real_data) + j0 * self.n0
+                fftw_execute_dft(self.lines_fwd[which], rows, rows)
+                total = total + self._multiply(j0, m, &qx[0], &qy[0], scale, power, &wrow[0])
+                j0 += BLOCK_ROWS
+        self.half_made = ok
+        if not ok:
+            raise ValueError("pidx must be sorted ascending and inside this rank's padded slab")
+        return total
+
+    def end(self, real_t[:, ::1] out=None):
+        """The second half after :meth:`begin_sparse`: the field ``F^{-1} f F x`` to the real
+        buffer, or to ``out`` (aligned like it; padding columns left as they are).
+        Collective."""
+        cdef real_t *target = self._target(out)
+        cdef Py_ssize_t j0, m
+        cdef fftw_complex *rows
+        cdef int which
+        if not self.half_made:
+            raise RuntimeError("no half-made transform to finish: begin_sparse was not the "
+                               "last use of the FFT buffers")
+        self.half_made = False
+        with nogil:
+            j0 = 0
+            while j0 < self.ln1:
+                which = _block(j0, self.ln1, self.block_lines[0], &m)
+                rows = (<fftw_complex *>self.real_data) + j0 * self.n0
+                fftw_execute_dft(self.lines_bwd[which], rows, rows)
+                j0 += BLOCK_ROWS
+            fftw_execute(self.transpose_bwd)
+            fftw_execute_dft_c2r(self.rows_bwd, self.fourier_data, target)
+
+    cdef real_t *_target(self, real_t[:, ::1] out) except NULL:
+        """Where a whole-slab result goes: the real buffer, or ``out`` checked against it."""
+        cdef Py_ssize_t pw = 2 * self.nky
+        if out is None:
+            return self.real_data
+        if out.shape[0] != self.ln0 or out.shape[1] != pw:
+            raise ValueError(f"out has shape {tuple(out.shape)[:2]}, the padded slab is "
+                             f"({self.ln0}, {pw})")
+        if fftw_alignment_of(&out[0, 0]) != fftw_alignment_of(self.real_data):
+            raise ValueError("out is not aligned like the real FFT buffer")
+        return &out[0, 0]
+
+    cdef bint _assemble_rows(self, const index_t[::1] pidx,
+                             const real_t[::1] values) noexcept nogil:
+        """The r2c row transforms of the field ``values`` at ``pidx`` into the Fourier buffer.
+
+        The input is assembled ``BLOCK_ROWS`` rows at a time in a buffer that
+        stays in cache and transformed from there.  Returns False if ``pidx``
+        is not sorted ascending inside this rank's padded slab (the rows are
+        transformed all the same, so that the collective stage after it runs).
+        """
+        cdef Py_ssize_t ns = pidx.shape[0], pw = 2 * self.nky, ln0 = self.ln0
+        cdef Py_ssize_t i0 = 0, k = 0, m, base, end
+        cdef int which
+        cdef bint ok = True
+        while i0 < ln0:
+            which = _block(i0, ln0, self.block_rows[0], &m)
+            base = i0 * pw
+            end = base + m * pw
+            memset(self.block, 0, m * pw * sizeof(real_t))
+            while k < ns and pidx[k] < end:
+                if pidx[k] < base:
+                    ok = False  # unsorted or negative
+                    break
+                self.block[pidx[k] - base] = values[k]
+                k += 1
+            fftw_execute_dft_r2c(self.block_fwd[which], self.block,
+                                 self.fourier_data + i0 * self.nky)
+            i0 += BLOCK_ROWS
+        return ok and k == ns
 
     def __dealloc__(self):
         _destroy(&self.rows_fwd)

@@ -143,6 +143,7 @@ class Grid:
             self._real_storage = _buffers_of._real_storage.view(self.dtype)[:2 * alloc]
             self._fourier_storage = _buffers_of._fourier_storage.view(self.complex_dtype)[:alloc]
         self._alias = None
+        self._parent = _buffers_of   # the double grid whose buffers an alias's are
         #: The real-space FFT buffer in FFTW's padded r2c layout, ``(nx_local,
         #: 2 (ny // 2 + 1))``: kernels that fill or read the buffer in a pass of
         #: their own, and the flat indices of :meth:`convolve_qpower_sparse`, use it.
@@ -224,6 +225,7 @@ class Grid:
         """
         if field is not None:
             np.copyto(self.real, field)
+        self._spoil()
         self._plans.forward()
         return self.fourier
 
@@ -241,6 +243,7 @@ class Grid:
         ndarray
             :attr:`real`.
         """
+        self._spoil()
         self._convolution.apply(self.qx, self.qy, scale, power)
         return self.real
 
@@ -260,8 +263,44 @@ class Grid:
             if a is not None and a.dtype != self.dtype:
                 raise TypeError(f"convolve_qpower_sparse: {name} is {a.dtype}, the grid's "
                                 f"fields are {self.dtype} ({self.precision} precision)")
+        self._spoil()
         self._convolution.apply_sparse(pidx, values, self.qx, self.qy, scale, power, out,
                                        gathered)
+
+    def convolve_qpower_sparse_begin(self, pidx, values, scale, power):
+        """The first half of :meth:`convolve_qpower_sparse`, with the field's form on the way.
+
+        Transforms the field (``values`` at the padded-slab indices ``pidx``,
+        zero elsewhere) forward and multiplies it by ``f = scale |q|^power``,
+        and returns this rank's part of ``sum_q f |F x|^2`` (accumulated in
+        double): summed over the ranks, the form ``(x, F^{-1} f F x)``, by
+        Parseval.  :meth:`convolve_qpower_end` then completes the convolution;
+        any transform of this grid or of one sharing its buffers
+        (:meth:`single_precision_alias`) before that discards the half-made
+        field, and the end then raises.  For a step length that needs only
+        the form, unless the step shows that the field is needed too.
+        """
+        if values.dtype != self.dtype:
+            raise TypeError(f"convolve_qpower_sparse_begin: values are {values.dtype}, the "
+                            f"grid's fields are {self.dtype} ({self.precision} precision)")
+        self._spoil()
+        return self._convolution.begin_sparse(pidx, values, self.qx, self.qy,
+                                              self.hermitian_weight, scale, power)
+
+    def convolve_qpower_end(self, out=None):
+        """Complete the convolution :meth:`convolve_qpower_sparse_begin` started: the result
+        to the padded real buffer, or to ``out`` (from :meth:`aligned_padded`)."""
+        if out is not None and out.dtype != self.dtype:
+            raise TypeError(f"convolve_qpower_end: out is {out.dtype}, the grid's fields are "
+                            f"{self.dtype} ({self.precision} precision)")
+        self._convolution.end(out)
+
+    def _spoil(self):
+        """A transform is about to use the FFT buffers: a half-made convolution in them (this
+        grid's, or that of the other grid on the same buffers) is lost."""
+        for grid in (self, self._alias, self._parent):
+            if grid is not None:
+                grid._convolution.half_made = False
 
     def aligned_padded(self):
         """A zeroed array shaped and aligned like the padded real FFT buffer.
@@ -307,6 +346,7 @@ class Grid:
             self._alias = Grid(self.shape, size=(self.Lx, self.Ly), comm=self.comm,
                                planner=self.planner, wisdom=self.wisdom, precision="single",
                                _buffers_of=self)
+            self._spoil()   # planning may have overwritten the buffers
             # what a first run of this size spends planning it, in the log
             get_logger("grid").info("single-precision alias of the %dx%d grid: FFTs planned in "
                                     "%.2f s (%s)", self.nx, self.ny, self._alias.planning_time,
@@ -318,6 +358,7 @@ class Grid:
 
         :attr:`fourier` is destroyed.  Returns :attr:`real`.
         """
+        self._spoil()
         self._plans.backward()
         return self.real
 

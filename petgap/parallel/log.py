@@ -215,10 +215,14 @@ def report_failure(exc, comm, failure_comm, clean_types=(ValueError, OSError),
 
 
 # ------------------------------------------------------------------ PETSc events
-#: Every application of the elastic operator ``K`` or ``K^{-1}``, dense or sparse
-#: (:class:`petgap.mechanics.half_space.ElasticHalfSpace`); its count is the
-#: solutions' ``operator_applications``.
+#: Every whole application of the elastic operator ``K`` or ``K^{-1}``, dense or sparse
+#: (:class:`petgap.mechanics.half_space.ElasticHalfSpace`); its count and half that of
+#: :data:`OPERATOR_HALF_EVENT` are the solutions' ``operator_applications``.
 OPERATOR_EVENT = "petgap:operator"
+#: Half an application: the forward or the inverse half of ``K^{-1}`` of a search
+#: direction, run apart (``ElasticHalfSpace.begin_image`` and ``end_image``); each
+#: counts half of one of the solutions' ``operator_applications``.
+OPERATOR_HALF_EVENT = "petgap:operatorHalf"
 #: The pressure solver's pass over the slab that finds the gap and its penetrations.
 GAP_PASS_EVENT = "petgap:gapPass"
 #: The pressure solver's update of the contact set (projected step, merge).

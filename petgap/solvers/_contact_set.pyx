@@ -241,24 +241,24 @@ cdef object _collect_overlap(real_t kind, object u_, object h_,
     return count
 
 
-def z_sums(zS, gS):
-    """Returns ``(sum z, sum g z)`` over S: ``z`` the preconditioned gap on S."""
-    if _single("z_sums", "zS gS", (zS, gS)):
-        return _z_sums[float](0, zS, gS)
-    return _z_sums[double](0, zS, gS)
+def gap_sums(vS, gS):
+    """Returns ``(sum v, sum g v)`` over S: ``v`` the preconditioned gap or the direction."""
+    if _single("gap_sums", "vS gS", (vS, gS)):
+        return _gap_sums[float](0, vS, gS)
+    return _gap_sums[double](0, vS, gS)
 
 
-cdef object _z_sums(real_t kind, object zS_, object gS_):
-    cdef const real_t[::1] zS = zS_
+cdef object _gap_sums(real_t kind, object vS_, object gS_):
+    cdef const real_t[::1] vS = vS_
     cdef const real_t[::1] gS = gS_
-    cdef Py_ssize_t k, ns = zS.shape[0]
-    cdef double z, sz = 0.0, sgz = 0.0
+    cdef Py_ssize_t k, ns = vS.shape[0]
+    cdef double v, sv = 0.0, sgv = 0.0
     with nogil:
         for k in range(ns):
-            z = zS[k]
-            sz += z
-            sgz += <double>gS[k] * z
-    return sz, sgz
+            v = vS[k]
+            sv += v
+            sgv += <double>gS[k] * v
+    return sv, sgv
 
 
 def direction(zS, double zshift, double beta, tS):

@@ -25,8 +25,7 @@ grows only like ``log^2(L / a0)`` -- operator preconditioning of first-kind
 boundary integral equations (Steinbach & Wendland, Adv. Comput. Math. 9 (1998)
 191; Hiptmair, Jerez-Hanckes & Urzua for screens).  With
 ``z = P_S K P_S g`` the iteration count stays nearly flat with resolution at the
-price of a third transform pair per iteration (two once the contact set has
-settled, see below).  The edge effects are the diagonal term ``kappa = K 1_S``
+price of one more transform pair per iteration (see "Step length" below).  The edge effects are the diagonal term ``kappa = K 1_S``
 that the zero extension of ``g`` across the contact edge adds to the stiffness;
 the preconditioner takes a share of it off,
 ``z = P_S K P_S g - theta kappa g`` (:mod:`petgap.solvers.edge_correction`,
@@ -78,11 +77,24 @@ counts for both preconditioners under each rule, and
 ``benchmarks/robustness.py`` checks that every solve of the robustness set
 converges.
 
-When an iteration changes no point of the contact set (no projection, no
-point enters), ``K^{-1} p`` follows ``p`` by the conjugate-gradient recurrence
-``u <- s (u - tau r)`` and the next fresh transform is skipped; a fresh
-transform is forced every 50 such steps and before any verdict, so round-off
-cannot accumulate into the answer.
+Step length
+-----------
+The exact line search ``tau = (g, t) / (t, K^{-1} t)`` needs the direction's
+image ``r = K^{-1} t`` only through ``(t, r)``, which by Parseval is
+``sum_q 2 |t_q|^2 / (E* |q| N)``: the forward half of the transform
+(:meth:`petgap.mechanics.half_space.ElasticHalfSpace.begin_image`).  The
+inverse half is run only when the iteration changes no point of the contact
+set (no projection, no point enters): then ``K^{-1} p`` follows ``p`` by the
+conjugate-gradient recurrence ``u <- s (u - tau r)``, and the next fresh
+transform of ``u`` is skipped; a fresh transform is forced every 50 such steps
+and before any verdict, so round-off cannot accumulate into the answer.  An
+iteration that changes the set costs two and a half pairs (``z``, the half of
+``r``, the fresh ``u``), one that does not two (``z``, ``r``).  Under load
+control the direction is kept at zero mean over ``S`` (the old direction's
+mean over the present set is taken off with ``z``'s), so that a step along it
+keeps the load and ``(t, r)`` needs no correction for the mean of ``r`` over
+``S``.  A half-space without the halves (a free boundary) images the direction
+whole.
 
 The contact set is stored as sorted index lists, with the pressure, the
 conjugate direction, the gap and the preconditioned gap kept on it only
@@ -99,7 +111,7 @@ Cold start: from the solution on a grid twice as coarse where the
 grid's shape allows (:mod:`petgap.solvers.coarse`, driven by
 :func:`coarse_start_pressure`), otherwise, under load control, from a uniform pressure.  The
 uniform start's first iteration has a closed form
-(:func:`_uniform_first_iteration`: one transform instead of three, and no
+(:func:`_uniform_first_iteration`: one transform instead of two and a half, and no
 set of every point), after which about 60 % of the points are in S on rough
 surfaces; the set shrinks from there by some 20 % per iteration, updated in
 place, so its peak is one copy of that first set (32 bytes per point of it).
@@ -295,11 +307,17 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     low = np.empty(0, dtype=np.float32)
     # (a free boundary's compliance is applied in double: its image stays double)
     single_image = rounded and problem.half_space.transforms_in_single
-    image = grid.padded
+    image, image_precision = grid.padded, None
     if rounded:
         alias = grid.single_precision_alias()
         if single_image:
-            image = alias.padded
+            image, image_precision = alias.padded, "single"
+    # the step length by Parseval, the image completed only where needed
+    split = problem.half_space.splits_image
+
+    def old_t_sum(tS):
+        # the old direction's sum over the present S, to take its mean off (load control)
+        return float(tS.sum(dtype=np.float64)) if load and delta else 0.0
     start = "warm" if initial_pressure is not None else ""
     if initial_pressure is None and coarse_start:
         initial_pressure, start = coarse_start_pressure(problem, control, tolerance, max_iterations,
@@ -370,7 +388,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     if contact is None and not periodic:
         contact = ContactSet.everywhere(mask, padded_width, target, dtype=dtype)  # C P0 is not zero
     if contact is None:
-        # Its first iteration in closed form (one transform instead of three,
+        # Its first iteration in closed form (one transform instead of two and a half,
         # and no set of every point); the uniform set itself only where that
         # iteration is also the last.
         scratch = grid.scratch(u)
@@ -461,12 +479,13 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             else:
                 half_space.apply_sparse(pidx, gS, inverse=False, gathered=zS)
             if edge is None:
-                sum_z, kz, g_sq = global_sums(comm, *_cs.z_sums(zS, gS), g_norm)
+                sum_z, kz, g_sq, t_sum = global_sums(comm, *_cs.gap_sums(zS, gS), g_norm,
+                                                     old_t_sum(tS))
                 gz = kz
             else:
                 # z less theta kappa g, if that is still positive on the gap
-                sum_z, kz, g_sq, sum_kg, sum_kgg = global_sums(
-                    comm, *_cs.z_sums(zS, gS), g_norm, *edge.sums(gS, idx))
+                sum_z, kz, g_sq, t_sum, sum_kg, sum_kgg = global_sums(
+                    comm, *_cs.gap_sums(zS, gS), g_norm, old_t_sum(tS), *edge.sums(gS, idx))
                 gz = kz - edge.theta * sum_kgg
                 use_far = gz > 0 and far is not None and settled
                 if use_far != far_used:
@@ -506,29 +525,33 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             g_norm = gz
             zS_, zshift_ = zS, zshift
         else:
-            g_norm = global_sums(comm, g_norm)[0]
+            g_norm, t_sum = global_sums(comm, g_norm, old_t_sum(tS))
             stiffness = 1.0
             zS_, zshift_ = gS, 0.0
         beta = delta * g_norm / g_old
         g_old = g_norm
         while True:
-            _cs.direction(zS_, zshift_, beta, tS)
-            # The image r = K^{-1} t of the direction: one transform pair, from S
-            # to the whole slab (the recurrence below needs r everywhere), in the
-            # search's precision
+            # Under load control t has zero mean on S (the old direction's mean on the
+            # present S taken off with z's), so that a step along it keeps the load.
+            _cs.direction(zS_, zshift_ + beta * t_sum / n_contact, beta, tS)
             if single_image:
                 low, t_low, _ = _in_single(low, tS)
-                half_space.apply_sparse(pidx, t_low, inverse=True, precision="single")
+            values = t_low if single_image else tS
+            if split:
+                # The step length needs only (t, K^{-1} t): by Parseval from the forward
+                # half of the direction's image r = K^{-1} t, whose inverse half is run
+                # below only if the recurrence needs r.
+                sum_rt = half_space.begin_image(pidx, values, precision=image_precision)
+                sum_gt, sum_rt = global_sums(comm, _cs.gap_sums(tS, gS)[1], sum_rt)
             else:
-                half_space.apply_sparse(pidx, tS, inverse=True)
-            sum_r, sum_gt, sum_rt, sum_t = global_sums(comm,
-                                                       *_cs.step_sums(image, pidx, gS, tS))
+                # The image r: one transform pair, from S to the whole slab (the
+                # recurrence below needs r everywhere), in the search's precision
+                half_space.apply_sparse(pidx, values, inverse=True, precision=image_precision)
+                _, sum_gt, sum_rt, _ = global_sums(comm, *_cs.step_sums(image, pidx, gS, tS))
             if sum_gt > 0 or beta == 0.0:
                 break
             # S changed since the last restart, so t need not descend: restart
             beta = 0.0
-        if load:
-            sum_rt -= sum_r / n_contact * sum_t  # r minus its mean over S
         if not sum_rt > 0:
             reason = "breakdown"
             break
@@ -549,6 +572,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         # Same contact set, no projection: u follows p linearly, no transform needed.
         fresh = n_overlap > 0 or n_clipped > 0 or since_fresh >= refresh_interval
         if not fresh:
+            if split:
+                half_space.end_image(precision=image_precision)
             _cs.recurrence(u, image, tau, scale, ny)
             contact.p[...] *= scale
             scale = 1.0
@@ -601,8 +626,8 @@ def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, 
     iteration's gap (shifted to zero mean over S, here every point) is
     ``g = mean(h) - h``, its preconditioned gap ``z = K g``, its direction
     ``t = z - mean(z)``, the image of that ``r = K^{-1} t = g``, and the step
-    ``tau = (g, t) / (r, t) = 1``: the general iteration's three transforms
-    reduce to one, and its pressure update to ``P0 - t`` projected, with the
+    ``tau = (g, t) / (r, t) = 1``: the general iteration's two and a half
+    transform pairs reduce to one, and its pressure update to ``P0 - t`` projected, with the
     entering pressure of :func:`polonsky_keer` where that clips a penetrating
     point.  The set of every point is never built: the new set (about 60 %
     of the points on rough surfaces) is made from the updated pressure,

@@ -56,7 +56,7 @@ def _collect_overlap(rng):
     return u, h, mask, 0.2, np.zeros(5, dtype=np.int32)   # too small: counts all the same
 
 
-def _z_sums(rng):
+def _gap_sums(rng):
     return rng.standard_normal(40) + 0.3, rng.standard_normal(40)
 
 
@@ -122,7 +122,7 @@ def _final_gap(rng):
 
 CASES = {name: build for name, build in [
     ("gather_gap", _gather_gap), ("shift_and_norms", _shift_and_norms),
-    ("gap_pass", _gap_pass), ("collect_overlap", _collect_overlap), ("z_sums", _z_sums),
+    ("gap_pass", _gap_pass), ("collect_overlap", _collect_overlap), ("gap_sums", _gap_sums),
     ("direction", _direction), ("direction_from_buffer", _direction_from_buffer),
     ("step_sums", _step_sums), ("update", _update), ("overlap_pressures", _overlap_pressures),
     ("merge", _merge), ("recurrence", _recurrence), ("uniform_gap", _uniform_gap),
@@ -185,7 +185,7 @@ def test_gather_gap_and_shift():
 
 
 def test_sums_over_s():
-    (r32, a32), (r64, a64) = both_precisions("z_sums")
+    (r32, a32), (r64, a64) = both_precisions("gap_sums")
     z, g = a64
     assert_sum(r32[0], r64[0], np.abs(z).sum())
     assert_sum(r32[1], r64[1], np.abs(g * z).sum())
@@ -199,7 +199,7 @@ def test_sums_over_s():
 def test_float32_terms_are_summed_in_double():
     """2^25 + 1 is 2^25 in float32: a float32 accumulator would lose all the ones."""
     big = np.concatenate([[2.0 ** 25], np.ones(100), [-2.0 ** 25]]).astype(np.float32)
-    assert cs.z_sums(big, np.ones_like(big)) == (100.0, 100.0)
+    assert cs.gap_sums(big, np.ones_like(big)) == (100.0, 100.0)
     pressure = big[:-1].copy()
     assert cs.update(pressure, np.zeros_like(pressure), np.zeros_like(pressure), 0.0,
                      1.0) == (0, 0, 2.0 ** 25 + 100)

@@ -2,7 +2,8 @@
 
 The half-space counts its own applications and runs each inside the event
 ``petgap:operator``; a solution's ``operator_applications`` is the count's
-difference over the solve, so the event's count must grow by exactly that much
+difference over the solve, so the event's count (with half that of
+``petgap:operatorHalf``, the halves a solver runs apart) must grow by exactly that much
 (on a grid the pressure solver does not coarsen, or with the coarse start off:
 the coarse levels' applications are the event's too, not the solution's).
 """
@@ -14,7 +15,7 @@ from petgap.mechanics.interactions import ExponentialAdhesion
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.parallel.log import (GAP_CG_EVENT, GAP_PASS_EVENT, OPERATOR_EVENT,
-                                 SET_UPDATE_EVENT, event)
+                                 OPERATOR_HALF_EVENT, SET_UPDATE_EVENT, event)
 from petgap.solvers.dispatch import solve
 from petgap.surfaces.self_affine import self_affine
 
@@ -42,13 +43,17 @@ def test_operator_event_counts_the_solutions_applications(comm, solver, control,
     problem = _problem(comm, interaction)
     scale = problem.gap_scale if isinstance(control, MeanGap) else problem.pressure_scale
     control = type(control)(control.value * scale)
-    before = {name: _count(name) for name in (OPERATOR_EVENT,) + kernels}
+    before = {name: _count(name) for name in (OPERATOR_EVENT, OPERATOR_HALF_EVENT) + kernels}
     applications = problem.operator_applications
     solution = solve(problem, control, solver=solver, tolerance=1e-6,
                      options={"petgap_coarse_start": "0"})
     assert solution.operator_applications > 0
     assert problem.operator_applications - applications == solution.operator_applications
-    assert _count(OPERATOR_EVENT) - before[OPERATOR_EVENT] == solution.operator_applications
+    halves = _count(OPERATOR_HALF_EVENT) - before[OPERATOR_HALF_EVENT]
+    assert (_count(OPERATOR_EVENT) - before[OPERATOR_EVENT] + halves / 2
+            == solution.operator_applications)
+    if solver == "pcg-pressure":
+        assert halves > 0   # the step length from the forward half of the direction's image
     for name in kernels:
         assert _count(name) > before[name]
 
