@@ -68,7 +68,7 @@ def worker(args):
 
     from petgap.app.build import build
     from petgap.io.scene import SINGLE_TOLERANCE_FLOOR, Scene
-    from petgap.parallel.log import OPERATOR_EVENT, event
+    from petgap.parallel.log import OPERATOR_EVENT, OPERATOR_HALF_EVENT, event
     from petgap.surfaces.topography import save_topography_npy
 
     comm = MPI.COMM_WORLD
@@ -108,13 +108,14 @@ def worker(args):
     if args.save:
         save_topography_npy(grid, model.topography, args.save)
     half_space = model.half_space
-    # Time spent in the elastic operator itself, from its PETSc log events, to
-    # split an evaluation's cost into the transform pair and the rest.
+    # Time spent in the elastic operator itself, from its PETSc log events (whole
+    # applications and halves), to split an evaluation's cost into the transform pair
+    # and the rest.
     PETSc.Log.begin()
-    operator = event(OPERATOR_EVENT)
+    operator = (event(OPERATOR_EVENT), event(OPERATOR_HALF_EVENT))
 
     def operator_seconds():
-        return operator.getPerfInfo()["time"]
+        return sum(e.getPerfInfo()["time"] for e in operator)
     marks = []  # (time, operator seconds, applications) at each iteration's verdict
     start_seconds = operator_seconds()
 

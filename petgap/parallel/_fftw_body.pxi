@@ -167,12 +167,9 @@ cdef inline int _block(Py_ssize_t start, Py_ssize_t rows, Py_ssize_t full,
     return 0 if m[0] == full else 1
 
 
-cdef inline double _scale_mode(real_t *s, double f) noexcept nogil:
-    """The complex value at ``s`` times ``f``; returns ``f |value|^2`` of the value before."""
-    cdef double re = s[0], im = s[1]
-    s[0] = <real_t>(re * f)
-    s[1] = <real_t>(im * f)
-    return f * (re * re + im * im)
+cdef inline double _norm2(const real_t *s) noexcept nogil:
+    """``|c|^2`` of the complex value at ``s``, in double."""
+    return <double>s[0] * s[0] + <double>s[1] * s[1]
 
 
 cdef class ConvolutionPlans:
@@ -213,6 +210,7 @@ cdef class ConvolutionPlans:
     cdef fftw_plan block_fwd[2]   # BLOCK_ROWS rows, and the remainder (or NULL)
     cdef fftw_plan block_bwd[2]
     cdef real_t *block
+    cdef double *factor   # one line's multiplier (begin_sparse)
     cdef real_t *real_data
     cdef fftw_complex *fourier_data
     cdef Py_ssize_t n0, ln0, ln1, nky
@@ -230,6 +228,7 @@ cdef class ConvolutionPlans:
         self.block_fwd[0] = self.block_fwd[1] = NULL
         self.block_bwd[0] = self.block_bwd[1] = NULL
         self.block = NULL
+        self.factor = NULL
 
     def __init__(self, MPI.Comm comm, Py_ssize_t n0, Py_ssize_t n1, Py_ssize_t local_n0,
                  Py_ssize_t local_n1, cnp.ndarray real, cnp.ndarray fourier,
@@ -254,7 +253,8 @@ cdef class ConvolutionPlans:
         cdef int *lines = self.block_lines
         cdef fftw_complex *transposed = <fftw_complex *>self.real_data
         self.block = <real_t *>fftw_malloc(BLOCK_ROWS * 2 * nky * sizeof(real_t))
-        if self.block == NULL:
+        self.factor = <double *>fftw_malloc(n0 * sizeof(double))
+        if self.block == NULL or self.factor == NULL:
             raise MemoryError("no memory for a block of rows")
         with nogil:
             # real (local_n0, 2 nky) reals -> fourier (local_n0, nky) complex
@@ -317,25 +317,59 @@ cdef class ConvolutionPlans:
         field these rows came from (the caller's ``scale`` carries ``1 / (n0 n1)``).
         """
         cdef Py_ssize_t i, j, n0 = self.n0
-        cdef double qyj, q2, row, total = 0.0
+        cdef double qyj, f, row, r0, r1, r2, r3, total = 0.0
+        cdef double *fr
         cdef real_t *s
         for j in range(j0, j0 + m):
             s = <real_t *>((<fftw_complex *>self.real_data) + j * n0)
             qyj = qy[j] * qy[j]
-            row = 0.0
+            if wrow == NULL:
+                # the hot loop of every application: no reduction, so that it vectorises
+                if power == 1:
+                    for i in range(n0):
+                        f = scale * sqrt(qx[i] * qx[i] + qyj)
+                        s[2 * i] = s[2 * i] * f
+                        s[2 * i + 1] = s[2 * i + 1] * f
+                else:
+                    for i in range(n0):
+                        f = scale / sqrt(qx[i] * qx[i] + qyj)
+                        s[2 * i] = s[2 * i] * f
+                        s[2 * i + 1] = s[2 * i + 1] * f
+                if qyj == 0.0:
+                    for i in range(n0):
+                        if qx[i] == 0.0:
+                            s[2 * i] = 0.0
+                            s[2 * i + 1] = 0.0
+                continue
+            # the row's multiplier (vectorised), then the form with four partial sums
+            # (so that the adds do not wait on each other), then the product
+            fr = self.factor
             if power == 1:
-                for i in range(n0):   # f = 0 at q = 0
-                    row = row + _scale_mode(s + 2 * i, scale * sqrt(qx[i] * qx[i] + qyj))
+                for i in range(n0):
+                    fr[i] = scale * sqrt(qx[i] * qx[i] + qyj)
             else:
                 for i in range(n0):
-                    q2 = qx[i] * qx[i] + qyj
-                    if q2 > 0.0:
-                        row = row + _scale_mode(s + 2 * i, scale / sqrt(q2))
-                    else:
-                        s[2 * i] = 0.0
-                        s[2 * i + 1] = 0.0
-            if wrow != NULL:
-                total = total + wrow[j] * row
+                    fr[i] = scale / sqrt(qx[i] * qx[i] + qyj)
+            if qyj == 0.0:
+                for i in range(n0):
+                    if qx[i] == 0.0:
+                        fr[i] = 0.0
+            r0 = r1 = r2 = r3 = 0.0
+            i = 0
+            while i + 4 <= n0:
+                r0 = r0 + fr[i] * _norm2(s + 2 * i)
+                r1 = r1 + fr[i + 1] * _norm2(s + 2 * i + 2)
+                r2 = r2 + fr[i + 2] * _norm2(s + 2 * i + 4)
+                r3 = r3 + fr[i + 3] * _norm2(s + 2 * i + 6)
+                i += 4
+            while i < n0:
+                r0 = r0 + fr[i] * _norm2(s + 2 * i)
+                i += 1
+            row = (r0 + r1) + (r2 + r3)
+            for i in range(n0):
+                s[2 * i] = <real_t>(s[2 * i] * fr[i])
+                s[2 * i + 1] = <real_t>(s[2 * i + 1] * fr[i])
+            total = total + wrow[j] * row
         return total
 
     cdef void _middle(self, const double *qx, const double *qy, double scale,
@@ -552,6 +586,8 @@ cdef class ConvolutionPlans:
             _destroy(&self.block_bwd[k])
         if self.block != NULL:
             fftw_free(self.block)
+        if self.factor != NULL:
+            fftw_free(self.factor)
 
 
 def weighted_power(const complex_t[:, ::1] c, const double[::1] qx,
