@@ -123,8 +123,8 @@ class FreeHalfSpace:
     #: ``C`` is applied in the map's precision (``apply_sparse``): a whole-slab result
     #: stays in ``grid.real``, in double.
     transforms_in_single = False
-    #: no ``begin_image``: a solver images its direction whole (``apply_sparse``)
-    splits_image = False
+    #: no ``begin_sparse``: a solver applies the operator whole (``apply_sparse``)
+    splits_transforms = False
 
     def __init__(self, grid, contact_modulus=1.0):
         self._periodic = ElasticHalfSpace(grid, contact_modulus)
@@ -241,8 +241,8 @@ class PaddedCellHalfSpace:
     #: ``apply_sparse`` works in the cell's precision: a whole-slab result stays in
     #: ``grid.real``.
     transforms_in_single = False
-    #: no ``begin_image``: a solver images its direction whole (``apply_sparse``)
-    splits_image = False
+    #: no ``begin_sparse``: a solver applies the operator whole (``apply_sparse``)
+    splits_transforms = False
 
     def __init__(self, cell, contact_modulus=1.0):
         contact_modulus = float(contact_modulus)

@@ -52,8 +52,9 @@ class ElasticHalfSpace:
     #: ``apply_sparse(..., precision="single")`` transforms in 32 bits, its whole-slab
     #: result in the grid's :meth:`~petgap.parallel.grid.Grid.single_precision_alias`.
     transforms_in_single = True
-    #: :meth:`begin_image` gives ``(t, K^{-1} t)`` for half a transform pair.
-    splits_image = True
+    #: :meth:`begin_sparse` and :meth:`begin_in_buffer` give ``(t, K t)`` for half a
+    #: transform pair, :meth:`finish` the field for the other half.
+    splits_transforms = True
 
     def __init__(self, grid, contact_modulus=1.0):
         contact_modulus = float(contact_modulus)
@@ -75,7 +76,7 @@ class ElasticHalfSpace:
     @property
     def applications(self):
         """Applications of ``K`` or ``K^{-1}`` (dense or sparse) so far, on this rank, in
-        transform pairs (:meth:`begin_image` and :meth:`end_image` count a half each).
+        transform pairs (a begin and :meth:`finish` count a half each).
 
         Every rank applies the operator together, so the count is the same on
         all; a solver reports its difference over the solve.
@@ -129,26 +130,36 @@ class ElasticHalfSpace:
         with event(OPERATOR_EVENT):
             grid.convolve_qpower_sparse(pidx, values, scale, power, out, gathered)
 
-    def begin_image(self, pidx, values, precision=None):
-        """This rank's part of ``(t, K^{-1} t)`` for a field ``t`` on a set of points, by
-        Parseval, with ``K^{-1} t`` left half-made.
+    def begin_sparse(self, pidx, values, inverse=False, precision=None):
+        """This rank's part of ``(t, K t)`` (or ``(t, K^{-1} t)``) for a field ``t`` on a set
+        of points, by Parseval, with ``K t`` left half-made.
 
         ``t`` is ``values`` at the sorted padded-slab indices ``pidx`` (as in
         :meth:`apply_sparse`).  The form needs the forward transform only:
-        summed over the ranks it is ``sum_x t K^{-1} t`` exactly, and a
-        conjugate-gradient step length needs no more.  :meth:`end_image`
-        completes ``K^{-1} t`` (the inverse transform) if the solver needs
-        the field after all; any other transform in between discards it.  Each
-        half counts half an application.  ``precision`` as in :meth:`apply_sparse`.
+        summed over the ranks it is ``sum_x t K t`` exactly, and a
+        conjugate-gradient step length needs no more.  :meth:`finish`
+        completes ``K t`` (the inverse transform) into the FFT buffer if the
+        solver needs the field after all; any other transform in between
+        discards it.  Each half counts half an application.  ``precision`` as in
+        :meth:`apply_sparse`.
         """
+        scale, power = (self._compliance, -1) if inverse else (self._stiffness, 1)
         grid = self._grid_in(precision)
         self._applications += 0.5
         with event(OPERATOR_HALF_EVENT):
-            return grid.convolve_qpower_sparse_begin(pidx, values, self._compliance, -1)
+            return grid.convolve_qpower_sparse_begin(pidx, values, scale, power)
 
-    def end_image(self, precision=None):
-        """``K^{-1} t`` of the last :meth:`begin_image`, into the FFT buffer (``grid.padded``,
-        or the single-precision alias's with ``precision="single"``).  Collective."""
+    def begin_in_buffer(self, inverse=False):
+        """:meth:`begin_sparse` of the field in ``grid.real`` (which it overwrites)."""
+        scale, power = (self._compliance, -1) if inverse else (self._stiffness, 1)
+        self._applications += 0.5
+        with event(OPERATOR_HALF_EVENT):
+            return self.grid.convolve_qpower_begin(scale, power)
+
+    def finish(self, precision=None):
+        """The field of the last :meth:`begin_sparse` or :meth:`begin_in_buffer`, into the
+        FFT buffer (``grid.padded``, or the single-precision alias's with
+        ``precision="single"``).  Collective."""
         grid = self._grid_in(precision)
         self._applications += 0.5
         with event(OPERATOR_HALF_EVENT):

@@ -216,7 +216,8 @@ cdef class ConvolutionPlans:
     cdef Py_ssize_t n0, ln0, ln1, nky
     cdef int block_rows[2], block_lines[2]   # rows of the plans [0] and [1] (_block_sizes)
     cdef object comm, real, fourier
-    #: True between :meth:`begin_sparse` and :meth:`end`; every other transform clears it
+    #: True between a begin (:meth:`begin_sparse`, :meth:`begin`) and :meth:`end`; every
+    #: other transform of these plans clears it
     cdef public bint half_made
 
     def __cinit__(self):
@@ -490,38 +491,58 @@ cdef class ConvolutionPlans:
             raise ValueError("pidx and values must have the same length")
         if wrow.shape[0] != self.ln1:
             raise ValueError("wrow does not match the Fourier slab")
-        cdef Py_ssize_t j0, m
-        cdef fftw_complex *rows
-        cdef int which
-        cdef double total = 0.0
+        cdef double total
         cdef bint ok
         with nogil:
             ok = self._assemble_rows(pidx, values)
             # collective from here (the transpose): every rank runs it, as in apply_sparse
-            fftw_execute(self.transpose_fwd)
-            j0 = 0
-            while j0 < self.ln1:
-                which = _block(j0, self.ln1, self.block_lines[0], &m)
-                rows = (<fftw_complex *>self.real_data) + j0 * self.n0
-                fftw_execute_dft(self.lines_fwd[which], rows, rows)
-                total = total + self._multiply(j0, m, &qx[0], &qy[0], scale, power, &wrow[0])
-                j0 += BLOCK_ROWS
+            total = self._forward_lines(&qx[0], &qy[0], &wrow[0], scale, power)
         self.half_made = ok
         if not ok:
             raise ValueError("pidx must be sorted ascending and inside this rank's padded slab")
         return total
 
+    def begin(self, const double[::1] qx, const double[::1] qy, const double[::1] wrow,
+              double scale, int power):
+        """:meth:`begin_sparse` of the field in the real buffer (the first half of
+        :meth:`apply`); the buffer is overwritten."""
+        self._check_multiplier(qx, qy, power)
+        if wrow.shape[0] != self.ln1:
+            raise ValueError("wrow does not match the Fourier slab")
+        cdef double total
+        with nogil:
+            fftw_execute(self.rows_fwd)
+            total = self._forward_lines(&qx[0], &qy[0], &wrow[0], scale, power)
+        self.half_made = True
+        return total
+
+    cdef double _forward_lines(self, const double *qx, const double *qy, const double *wrow,
+                               double scale, int power) noexcept nogil:
+        """Fourier rows -> transpose, 1D transforms, multiplier; returns the form."""
+        cdef Py_ssize_t j0 = 0, m
+        cdef fftw_complex *rows
+        cdef int which
+        cdef double total = 0.0
+        fftw_execute(self.transpose_fwd)
+        while j0 < self.ln1:
+            which = _block(j0, self.ln1, self.block_lines[0], &m)
+            rows = (<fftw_complex *>self.real_data) + j0 * self.n0
+            fftw_execute_dft(self.lines_fwd[which], rows, rows)
+            total = total + self._multiply(j0, m, qx, qy, scale, power, wrow)
+            j0 += BLOCK_ROWS
+        return total
+
     def end(self, real_t[:, ::1] out=None):
-        """The second half after :meth:`begin_sparse`: the field ``F^{-1} f F x`` to the real
-        buffer, or to ``out`` (aligned like it; padding columns left as they are).
-        Collective."""
+        """The second half after :meth:`begin_sparse` or :meth:`begin`: the field
+        ``F^{-1} f F x`` to the real buffer, or to ``out`` (aligned like it; padding
+        columns left as they are).  Collective."""
         cdef real_t *target = self._target(out)
         cdef Py_ssize_t j0, m
         cdef fftw_complex *rows
         cdef int which
         if not self.half_made:
-            raise RuntimeError("no half-made transform to finish: begin_sparse was not the "
-                               "last use of the FFT buffers")
+            raise RuntimeError("no half-made transform to finish: a begin was not the last "
+                               "use of the FFT buffers")
         self.half_made = False
         with nogil:
             j0 = 0

@@ -287,9 +287,16 @@ class Grid:
         return self._convolution.begin_sparse(pidx, values, self.qx, self.qy,
                                               self.hermitian_weight, scale, power)
 
+    def convolve_qpower_begin(self, scale, power):
+        """:meth:`convolve_qpower_sparse_begin` of the field in :attr:`real` (the first half
+        of :meth:`convolve_qpower`): returns this rank's part of its form."""
+        self._spoil()
+        return self._convolution.begin(self.qx, self.qy, self.hermitian_weight, scale, power)
+
     def convolve_qpower_end(self, out=None):
-        """Complete the convolution :meth:`convolve_qpower_sparse_begin` started: the result
-        to the padded real buffer, or to ``out`` (from :meth:`aligned_padded`)."""
+        """Complete the convolution a begin (:meth:`convolve_qpower_sparse_begin`,
+        :meth:`convolve_qpower_begin`) started: the result to the padded real buffer, or
+        to ``out`` (from :meth:`aligned_padded`)."""
         if out is not None and out.dtype != self.dtype:
             raise TypeError(f"convolve_qpower_end: out is {out.dtype}, the grid's fields are "
                             f"{self.dtype} ({self.precision} precision)")

@@ -219,9 +219,9 @@ def report_failure(exc, comm, failure_comm, clean_types=(ValueError, OSError),
 #: (:class:`petgap.mechanics.half_space.ElasticHalfSpace`); its count and half that of
 #: :data:`OPERATOR_HALF_EVENT` are the solutions' ``operator_applications``.
 OPERATOR_EVENT = "petgap:operator"
-#: Half an application: the forward or the inverse half of ``K^{-1}`` of a search
-#: direction, run apart (``ElasticHalfSpace.begin_image`` and ``end_image``); each
-#: counts half of one of the solutions' ``operator_applications``.
+#: Half an application: the forward or the inverse half of the operator applied to a
+#: search direction, run apart (``ElasticHalfSpace.begin_sparse``, ``begin_in_buffer``
+#: and ``finish``); each counts half of one of the solutions' ``operator_applications``.
 OPERATOR_HALF_EVENT = "petgap:operatorHalf"
 #: The pressure solver's pass over the slab that finds the gap and its penetrations.
 GAP_PASS_EVENT = "petgap:gapPass"

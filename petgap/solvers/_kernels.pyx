@@ -125,18 +125,21 @@ def gcg_curvature(const double[:, ::1] real, const double[:, ::1] t, const doubl
                   double rho):
     """Returns ``(t.K t + sum v''(g) t^2, sum (grad + lam) t, max |t|, min over t < 0 of g / -t)``.
 
-    ``real`` holds ``K t``; ``v'' = -v' / rho`` for the exponential.  The last
-    value is the step at which the first free point would reach the wall.
+    ``real`` holds ``K t``, or is None: then the first value leaves ``t.K t`` out
+    (the caller has it by Parseval).  ``v'' = -v' / rho`` for the exponential.
+    The last value is the step at which the first free point would reach the wall.
     """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double tv, e, curv = 0.0, slope = 0.0, tmax = 0.0, reach = INFINITY
+    cdef bint image = real is not None
     with nogil:
         for i in range(m):
             for j in range(n):
                 tv = t[i, j]
                 if tv == 0.0:
                     continue
-                curv += tv * real[i, j]
+                if image:
+                    curv += tv * real[i, j]
                 if adh:
                     e = vp[i, j]
                     curv -= (e / rho) * tv * tv

@@ -31,9 +31,12 @@ control the preconditioner adds ``c mean_F(r)`` on ``F`` with
 eigenvalue costs about one iteration whatever ``c`` is.
 
 Each iteration applies ``K^{-1}`` (preconditioner) and ``K`` (curvature along
-the direction): two transform pairs.  ``p_el`` follows by the recurrence
-``p_el += tau K t`` when the projection does not act; otherwise it is recomputed
-(a third pair).  Step lengths are exact minimisers of the local quadratic
+the direction).  The curvature needs ``K t`` only through ``t.K t``, which by
+Parseval the forward half of the transform gives
+(:meth:`petgap.mechanics.half_space.ElasticHalfSpace.begin_in_buffer`); the
+inverse half is run only when the projection does not act and ``p_el`` follows
+by the recurrence ``p_el += tau K t``: two transform pairs then.  Otherwise
+``p_el`` is recomputed (a pair) in place of that half: two and a half.  Step lengths are exact minimisers of the local quadratic
 model; where the adhesive curvature makes the model non-convex along the
 direction, the step is capped at ``rho`` per point and the method restarts, and
 such steps are counted and reported.  The same cap (and restart) applies to a
@@ -201,6 +204,7 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
     fresh_pressure()
     fresh, since_fresh = True, 0
     beta_ok, rz_old = False, 1.0
+    split = half_space.splits_transforms
     history = []
     negative_curvature = 0
     converged, reason, it = False, "max_iterations", 0
@@ -263,10 +267,18 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
         rz_old = rz
         _pass(_k.gcg_direction, padded, pel, g, vp, adh, t, lam_f, zshift, beta)
 
-        # curvature along t (one pair): K t lands in the buffer
-        half_space.apply_in_buffer(inverse=False)
-        curv, slope, tmax, reach = _pass(_k.gcg_curvature, padded, t, pel, g, vp, adh,
-                                                    lam if load else 0.0, rho)
+        # curvature along t: t.K t by Parseval from the forward half of K t, whose inverse
+        # half runs below only if p_el follows by the recurrence (a whole pair where the
+        # half-space has no halves)
+        if split:
+            form = half_space.begin_in_buffer(inverse=False)
+            curv, slope, tmax, reach = _pass(_k.gcg_curvature, None, t, pel, g, vp, adh,
+                                             lam if load else 0.0, rho)
+            curv += form
+        else:
+            half_space.apply_in_buffer(inverse=False)
+            curv, slope, tmax, reach = _pass(_k.gcg_curvature, padded, t, pel, g, vp, adh,
+                                             lam if load else 0.0, rho)
         curv, slope = global_sums(comm, curv, slope)
         tmax = comm.allreduce(tmax, op=MPI.MAX)
         if not slope < 0:
@@ -299,6 +311,8 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
             fresh, since_fresh = True, 0
             beta_ok = negative == 0 and curv > 0 and not capped
         else:
+            if split:
+                half_space.finish()
             _pass(_k.axpy, pel, padded, tau)
             fresh = False
             since_fresh += 1

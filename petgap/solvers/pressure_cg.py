@@ -82,7 +82,7 @@ Step length
 The exact line search ``tau = (g, t) / (t, K^{-1} t)`` needs the direction's
 image ``r = K^{-1} t`` only through ``(t, r)``, which by Parseval is
 ``sum_q 2 |t_q|^2 / (E* |q| N)``: the forward half of the transform
-(:meth:`petgap.mechanics.half_space.ElasticHalfSpace.begin_image`).  The
+(:meth:`petgap.mechanics.half_space.ElasticHalfSpace.begin_sparse`).  The
 inverse half is run only when the iteration changes no point of the contact
 set (no projection, no point enters): then ``K^{-1} p`` follows ``p`` by the
 conjugate-gradient recurrence ``u <- s (u - tau r)``, and the next fresh
@@ -313,7 +313,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         if single_image:
             image, image_precision = alias.padded, "single"
     # the step length by Parseval, the image completed only where needed
-    split = problem.half_space.splits_image
+    split = problem.half_space.splits_transforms
 
     def old_t_sum(tS):
         # the old direction's sum over the present S, to take its mean off (load control)
@@ -541,7 +541,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                 # The step length needs only (t, K^{-1} t): by Parseval from the forward
                 # half of the direction's image r = K^{-1} t, whose inverse half is run
                 # below only if the recurrence needs r.
-                sum_rt = half_space.begin_image(pidx, values, precision=image_precision)
+                sum_rt = half_space.begin_sparse(pidx, values, inverse=True,
+                                                 precision=image_precision)
                 sum_gt, sum_rt = global_sums(comm, _cs.gap_sums(tS, gS)[1], sum_rt)
             else:
                 # The image r: one transform pair, from S to the whole slab (the
@@ -573,7 +574,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         fresh = n_overlap > 0 or n_clipped > 0 or since_fresh >= refresh_interval
         if not fresh:
             if split:
-                half_space.end_image(precision=image_precision)
+                half_space.finish(precision=image_precision)
             _cs.recurrence(u, image, tau, scale, ny)
             contact.p[...] *= scale
             scale = 1.0

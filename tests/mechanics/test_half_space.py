@@ -138,14 +138,17 @@ def test_sparse_application_refuses_unsorted_points(comm):
 
 
 @pytest.mark.parametrize("shape", [(64, 48), (113, 76), (9, 7), (40, 33), (5, 24)])
-def test_image_in_halves_gives_the_form_then_the_sparse_application(comm, shape):
-    """``begin_image`` returns ``(t, K^{-1} t)`` by Parseval; ``end_image`` completes ``K^{-1} t``.
+@pytest.mark.parametrize("inverse", [True, False])
+def test_an_application_in_halves_gives_the_form_then_the_field(comm, shape, inverse):
+    """A begin returns ``(t, K t)`` (or ``K^{-1}``) by Parseval; ``finish`` completes ``K t``.
 
     The form, summed over the ranks, is the real-space sum of ``t`` times the
-    dense displacement of ``t``; the completed image is ``apply_sparse``'s, and
-    each half counts half an application.  In single precision (on the alias)
-    both hold to float32 round-off.  Shapes as in the sparse application's
-    test: partial blocks of rows and lines, an odd ``ny`` (no Nyquist row).
+    dense application to ``t``; the completed field is ``apply_sparse``'s, and
+    each half counts half an application -- for a field given on points
+    (``begin_sparse``) and one in the FFT buffer (``begin_in_buffer``).  In
+    single precision (on the alias) both hold to float32 round-off.  Shapes as
+    in the sparse application's test: partial blocks of rows and lines, an odd
+    ``ny`` (no Nyquist row).
     """
     grid = Grid(shape, size=(1.3, 0.7), comm=comm, planner="estimate")
     half_space = ElasticHalfSpace(grid, 3.0)
@@ -157,50 +160,56 @@ def test_image_in_halves_gives_the_form_then_the_sparse_application(comm, shape)
     values = rng.standard_normal(len(pidx))
     field = np.zeros(grid.local_shape)
     field[mask] = values
-    form = grid.sum(field * half_space.displacement(field))
+    applied = half_space.displacement(field) if inverse else half_space.pressure(field)
+    form = grid.sum(field * applied)
     assert form > 0
     dense = grid.aligned_padded()
-    half_space.apply_sparse(pidx, values, inverse=True, out=dense)
+    half_space.apply_sparse(pidx, values, inverse=inverse, out=dense)
     scale = comm.allreduce(float(np.abs(dense).max()), op=MPI.MAX)
-    for precision, rtol in ((None, 1e-12), ("single", 2e-6)):
+    for how, precision, rtol in (("sparse", None, 1e-12), ("sparse", "single", 2e-6),
+                                 ("buffer", None, 1e-12)):
         low = values if precision is None else values.astype(np.float32)
         target = grid if precision is None else grid.single_precision_alias()
         before = half_space.applications
-        target.real[...] = np.nan   # the image must overwrite every point
-        got = comm.allreduce(half_space.begin_image(pidx, low, precision=precision))
-        assert got == pytest.approx(form, rel=rtol)
+        if how == "sparse":
+            target.real[...] = np.nan   # the field must overwrite every point
+            got = half_space.begin_sparse(pidx, low, inverse=inverse, precision=precision)
+        else:
+            grid.real[...] = field
+            got = half_space.begin_in_buffer(inverse=inverse)
+        assert comm.allreduce(got) == pytest.approx(form, rel=rtol)
         assert half_space.applications == before + 0.5
-        half_space.end_image(precision=precision)
+        half_space.finish(precision=precision)
         assert half_space.applications == before + 1
         error = comm.allreduce(float(np.abs(target.real - dense[:, :shape[1]]).max()),
                                op=MPI.MAX)
         assert error <= rtol * scale
 
 
-def test_an_image_not_begun_or_overwritten_is_not_completed(comm):
-    """``end_image`` refuses, on every rank, unless ``begin_image`` was the last transform
-    of the grid's buffers -- another application, a plain transform, or one of the
+def test_an_application_not_begun_or_overwritten_is_not_finished(comm):
+    """``finish`` refuses, on every rank, unless a begin was the last transform of the
+    grid's buffers -- another application, a plain transform, or one of the
     single-precision alias (the same memory) in between loses the half-made field."""
     grid = Grid((24, 20), comm=comm, planner="estimate")
     half_space = ElasticHalfSpace(grid)
     width = grid.padded.shape[1]
     pidx = np.array([width + 2, 2 * width + 5], dtype=np.int32)
     values = np.array([1.0, -0.5])
-    with pytest.raises(RuntimeError, match="begin_sparse was not the last use"):
-        half_space.end_image()
+    with pytest.raises(RuntimeError, match="a begin was not the last"):
+        half_space.finish()
     for spoil in (lambda: half_space.apply_sparse(pidx, values),
                   lambda: grid.forward(),
                   lambda: half_space.apply_sparse(pidx, values.astype(np.float32),
                                                   precision="single")):
-        half_space.begin_image(pidx, values)
+        half_space.begin_sparse(pidx, values, inverse=True)
         spoil()
-        with pytest.raises(RuntimeError, match="begin_sparse was not the last use"):
-            half_space.end_image()
-    half_space.begin_image(pidx, values.astype(np.float32), precision="single")
+        with pytest.raises(RuntimeError, match="a begin was not the last"):
+            half_space.finish()
+    half_space.begin_sparse(pidx, values.astype(np.float32), precision="single")
     grid.backward()
-    with pytest.raises(RuntimeError, match="begin_sparse was not the last use"):
-        half_space.end_image(precision="single")
+    with pytest.raises(RuntimeError, match="a begin was not the last"):
+        half_space.finish(precision="single")
     with pytest.raises(ValueError, match="sorted"):
-        half_space.begin_image(np.array([9 * width + 1, 2], dtype=np.int32), values)
+        half_space.begin_sparse(np.array([9 * width + 1, 2], dtype=np.int32), values)
     with pytest.raises(TypeError, match="float32"):
-        half_space.begin_image(pidx, values.astype(np.float32))
+        half_space.begin_sparse(pidx, values.astype(np.float32))

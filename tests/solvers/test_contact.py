@@ -762,7 +762,7 @@ def test_step_length_from_half_the_directions_image(comm, monkeypatch, control):
     of the whole image's real-space sums, and saves half a pair per iteration that
     recomputes the displacement.
 
-    The same solve with the half-space's ``splits_image`` off (the direction imaged
+    The same solve with the half-space's ``splits_transforms`` off (the direction imaged
     whole, as on a free boundary) must take as many iterations to the same contact
     set and pressures within round-off of the step lengths; the halves save a
     positive multiple of half a pair, at most half a pair per iteration.
@@ -772,7 +772,7 @@ def test_step_length_from_half_the_directions_image(comm, monkeypatch, control):
     ctrl = (Load(0.01 * problem.pressure_scale) if control == "load"
             else MeanGap(0.5 * problem.gap_scale))
     halves = polonsky_keer(problem, ctrl, tolerance=1e-10)
-    monkeypatch.setattr(problem.half_space, "splits_image", False)
+    monkeypatch.setattr(problem.half_space, "splits_transforms", False)
     whole = polonsky_keer(problem, ctrl, tolerance=1e-10)
     assert halves.converged and whole.converged
     assert halves.iterations == whole.iterations
