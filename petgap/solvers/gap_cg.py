@@ -36,10 +36,11 @@ Parseval the forward half of the transform gives
 (:meth:`petgap.mechanics.half_space.ElasticHalfSpace.begin_in_buffer`); the
 inverse half is run only when the projection does not act and ``p_el`` follows
 by the recurrence ``p_el += tau K t``: two transform pairs then.  Otherwise
-``p_el`` is recomputed (a pair) in place of that half: two and a half.  Step lengths are exact minimisers of the local quadratic
-model; where the adhesive curvature makes the model non-convex along the
-direction, the step is capped at ``rho`` per point and the method restarts, and
-such steps are counted and reported.  The same cap (and restart) applies to a
+``p_el`` is recomputed (a pair) in place of that half: two and a half.  Step
+lengths are exact minimisers of the local quadratic model; where the adhesive
+curvature makes the model non-convex along the direction, the step is capped at
+``rho`` per point and the method restarts, and such steps are counted and
+reported.  The same cap (and restart) applies to a
 convex adhesive step longer than ``rho`` at some point: the quadratic model of
 ``exp(-g / rho)`` holds only over changes of ``g`` small against ``rho``, and an
 almost vanishing curvature ``t.K t + sum v''(g) t^2`` would otherwise send the

@@ -25,9 +25,10 @@ grows only like ``log^2(L / a0)`` -- operator preconditioning of first-kind
 boundary integral equations (Steinbach & Wendland, Adv. Comput. Math. 9 (1998)
 191; Hiptmair, Jerez-Hanckes & Urzua for screens).  With
 ``z = P_S K P_S g`` the iteration count stays nearly flat with resolution at the
-price of one more transform pair per iteration (see "Step length" below).  The edge effects are the diagonal term ``kappa = K 1_S``
-that the zero extension of ``g`` across the contact edge adds to the stiffness;
-the preconditioner takes a share of it off,
+price of one more transform pair per iteration (see "Step length" below).  The
+edge effects are the diagonal term ``kappa = K 1_S`` that the zero extension of
+``g`` across the contact edge adds to the stiffness; the preconditioner takes a
+share of it off,
 ``z = P_S K P_S g - theta kappa g`` (:mod:`petgap.solvers.edge_correction`,
 ``edge_correction``), which lowers the edge eigenvalues.  What the local
 stiffness cannot see is the far field by which the contact patches press on
@@ -314,10 +315,6 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             image, image_precision = alias.padded, "single"
     # the step length by Parseval, the image completed only where needed
     split = problem.half_space.splits_transforms
-
-    def old_t_sum(tS):
-        # the old direction's sum over the present S, to take its mean off (load control)
-        return float(tS.sum(dtype=np.float64)) if load and delta else 0.0
     start = "warm" if initial_pressure is not None else ""
     if initial_pressure is None and coarse_start:
         initial_pressure, start = coarse_start_pressure(problem, control, tolerance, max_iterations,
@@ -480,12 +477,13 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                 half_space.apply_sparse(pidx, gS, inverse=False, gathered=zS)
             if edge is None:
                 sum_z, kz, g_sq, t_sum = global_sums(comm, *_cs.gap_sums(zS, gS), g_norm,
-                                                     old_t_sum(tS))
+                                                     _direction_sum(tS, load and delta != 0.0))
                 gz = kz
             else:
                 # z less theta kappa g, if that is still positive on the gap
                 sum_z, kz, g_sq, t_sum, sum_kg, sum_kgg = global_sums(
-                    comm, *_cs.gap_sums(zS, gS), g_norm, old_t_sum(tS), *edge.sums(gS, idx))
+                    comm, *_cs.gap_sums(zS, gS), g_norm,
+                    _direction_sum(tS, load and delta != 0.0), *edge.sums(gS, idx))
                 gz = kz - edge.theta * sum_kgg
                 use_far = gz > 0 and far is not None and settled
                 if use_far != far_used:
@@ -525,7 +523,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             g_norm = gz
             zS_, zshift_ = zS, zshift
         else:
-            g_norm, t_sum = global_sums(comm, g_norm, old_t_sum(tS))
+            g_norm, t_sum = global_sums(comm, g_norm, _direction_sum(tS, load and delta != 0.0))
             stiffness = 1.0
             zS_, zshift_ = gS, 0.0
         beta = delta * g_norm / g_old
@@ -603,6 +601,12 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         solver="pcg-pressure", iterations=it, wall_time=timer(), history=history,
         operator_applications=problem.operator_applications - start_ops, residuals=residuals,
         start=start, start_time=start_time)
+
+
+def _direction_sum(tS, wanted):
+    """The old direction's sum over the present S where ``wanted`` (load control, and the
+    old direction kept: its mean is taken off the new one), else 0; in double."""
+    return float(tS.sum(dtype=np.float64)) if wanted else 0.0
 
 
 def _in_single(low, values):
