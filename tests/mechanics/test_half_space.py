@@ -81,6 +81,19 @@ def test_rejects_bad_modulus(comm):
         ElasticHalfSpace(grid, -1.0)
 
 
+def _field_on_points(grid, seed):
+    """A random field on about 30 % of this rank's points: ``(mask, padded-slab indices,
+    values there, the field on the slab)``."""
+    rng = np.random.default_rng(seed + grid.comm.rank)
+    mask = rng.random(grid.local_shape) < 0.3
+    rows, cols = np.nonzero(mask)
+    pidx = (rows * grid.padded.shape[1] + cols).astype(np.int32)
+    values = rng.standard_normal(len(pidx))
+    field = np.zeros(grid.local_shape)
+    field[mask] = values
+    return mask, pidx, values, field
+
+
 @pytest.mark.parametrize("shape", [(64, 48), (113, 76), (9, 7), (40, 33), (5, 24)])
 def test_sparse_application_equals_dense(comm, shape):
     """``apply_sparse`` is ``apply_in_buffer`` of the field given on a set of points.
@@ -93,14 +106,7 @@ def test_sparse_application_equals_dense(comm, shape):
     """
     grid = Grid(shape, size=(1.3, 0.7), comm=comm, planner="estimate")
     half_space = ElasticHalfSpace(grid, 3.0)
-    rng = np.random.default_rng(7 + comm.rank)
-    width = grid.padded.shape[1]
-    mask = rng.random(grid.local_shape) < 0.3
-    rows, cols = np.nonzero(mask)
-    pidx = (rows * width + cols).astype(np.int32)
-    values = rng.standard_normal(len(pidx))
-    field = np.where(mask, 0.0, 0.0)
-    field[mask] = values
+    mask, pidx, values, field = _field_on_points(grid, 7)
     out = grid.aligned_padded()
     errors = []
     for inverse in (False, True):
@@ -152,14 +158,7 @@ def test_an_application_in_halves_gives_the_form_then_the_field(comm, shape, inv
     """
     grid = Grid(shape, size=(1.3, 0.7), comm=comm, planner="estimate")
     half_space = ElasticHalfSpace(grid, 3.0)
-    rng = np.random.default_rng(17 + comm.rank)
-    width = grid.padded.shape[1]
-    mask = rng.random(grid.local_shape) < 0.3
-    rows, cols = np.nonzero(mask)
-    pidx = (rows * width + cols).astype(np.int32)
-    values = rng.standard_normal(len(pidx))
-    field = np.zeros(grid.local_shape)
-    field[mask] = values
+    mask, pidx, values, field = _field_on_points(grid, 17)
     applied = half_space.displacement(field) if inverse else half_space.pressure(field)
     form = grid.sum(field * applied)
     assert form > 0
