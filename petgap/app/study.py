@@ -456,7 +456,7 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
                    inv_kappa_att=force_state.inv_kappa_att)
     if not row["converged"]:
         log.warning("%s did not converge (%s); measured as it is", what, row["reason"])
-    log.info("%s: %d x %d, a0 = %.4g: %s, %d iterations, %d FFT pairs, %.2f s (+%.2f s setup), "
+    log.info("%s: %d x %d, a0 = %.4g: %s, %d iterations, %g FFT pairs, %.2f s (+%.2f s setup), "
              "%.0f B/point; c = %.6g, d_rep = %.6g", what, rung.nx, rung.ny, rung.a0,
              "converged" if row["converged"] else "NOT converged", row["iterations"],
              row["fft_pairs"], row["wall_time"], row["setup_time"], row["bytes_per_point"], c,
