@@ -2,7 +2,7 @@
 """A performance model of a petgap solve, fitted here, used to plan cluster runs.
 
 One iteration of the default solver (``pcg-pressure``) costs ``k`` FFT pairs (``k`` about
-2.6-3.1: ``docs/benchmarks.md``) plus passes over the contact set and the slab, and a few
+2.4-2.6: ``docs/benchmarks.md``) plus passes over the contact set and the slab, and a few
 reductions.  The model:
 
 * **FFT pair** on ``P`` ranks of an ``n x n`` grid (``N = n^2`` points)::
@@ -49,14 +49,12 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-#: FFT pairs per iteration of pcg-pressure (docs/benchmarks.md: 2.6-3.1).
-PAIRS_PER_ITERATION = 2.9
 #: Bytes per point and fixed bytes per rank of a whole non-adhesive run (docs/benchmarks.md,
 #: "Memory per point": 43.4-45.1 measured at 4096^2-16384^2 on one rank, rounded up).
 BYTES_PER_POINT, FIXED_BYTES = 46.0, 91e6
 #: Iterations of the GUIDE surface at 512^2-16384^2 (docs/benchmarks.md, "Non-adhesive rough
 #: contact" and "16384^2 on this machine").
-ITERATIONS = {512: 13, 1024: 13, 2048: 14, 4096: 15, 8192: 17, 16384: 27}
+ITERATIONS = {512: 13, 1024: 13, 2048: 14, 4096: 15, 8192: 18, 16384: 33}
 
 
 def solve_worker(n):

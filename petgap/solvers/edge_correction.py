@@ -58,7 +58,6 @@ import functools
 import numpy as np
 from mpi4py import MPI
 
-from petgap.parallel.grid import Grid
 from petgap.parallel.log import SET_UPDATE_EVENT, event
 from petgap.solvers import _contact_set as _cs
 from petgap.solvers.contact_set import INDEX
@@ -78,14 +77,14 @@ DRIFT = 4
 def kernel_window(grid, contact_modulus, window=WINDOW):
     """The stiffness kernel ``K(di dx, dj dy)`` for ``|di|, |dj| <= W``, shape ``(2W+1, 2W+1)``.
 
-    From the half-space's own operator on a grid of the same pixel shape and at
-    most :data:`TABLE_SIDE` points a side (the grid itself where it is smaller),
-    on ``MPI.COMM_SELF``: the same numbers on every rank.  ``W`` shrinks to fit
-    a small grid (the window may not wrap onto itself).  The kernel is ``E* / dx``
-    times a function of the pixels' aspect ratio (the symbol ``E* |q| / 2`` is
-    homogeneous in ``q``), so the levels of a coarse start of 256 points a side
-    or more, whose pixels double, share one computation, and later solves reuse
-    it.
+    The half-space's symbol ``E* |q| / 2`` (q = 0 dropped) transformed back on a
+    periodic grid of the same pixel shape and at most :data:`TABLE_SIDE` points
+    a side (the grid itself where it is smaller): the same numbers on every
+    rank.  ``W`` shrinks to fit a small grid (the window may not wrap onto
+    itself).  The kernel is ``E* / dx`` times a function of the pixels' aspect
+    ratio (the symbol is homogeneous in ``q``), so the levels of a coarse start
+    of 256 points a side or more, whose pixels double, share one computation,
+    and later solves reuse it.
     """
     mx, my = min(grid.nx, TABLE_SIDE), min(grid.ny, TABLE_SIDE)
     w = min(window, (mx - 1) // 2, (my - 1) // 2)
@@ -94,17 +93,28 @@ def kernel_window(grid, contact_modulus, window=WINDOW):
 
 @functools.lru_cache(maxsize=32)
 def _unit_kernel_window(mx, my, aspect, w):
-    """:func:`kernel_window` for ``E* = 1`` and ``dx = 1``, ``dy = aspect`` (read-only)."""
-    small = Grid((mx, my), size=(float(mx), my * aspect), comm=MPI.COMM_SELF,
-                 planner="estimate", wisdom=False)
-    small.real[...] = 0.0
-    small.real[0, 0] = 1.0
-    # K delta as ElasticHalfSpace applies it (scale E* / 2, here 1 / 2, with the 1 / N of
-    # the inverse transform), but not one of its counted applications: the solvers'
-    # operator count and its PETSc log event stay those of the solve
-    k = small.convolve_qpower(1.0 / (2.0 * small.npoints), 1)
-    rows, cols = np.arange(-w, w + 1) % mx, np.arange(-w, w + 1) % my
-    table = np.ascontiguousarray(k[np.ix_(rows, cols)])
+    """:func:`kernel_window` for ``E* = 1`` and ``dx = 1``, ``dy = aspect`` (read-only).
+
+    The inverse transform evaluated at the window's ``(2W+1)^2`` offsets only,
+    as a cosine sum: the symbol is even in ``qx`` and ``qy``, so
+
+        K(i, j) = (1 / N) sum_qx sum_ky w_ky (|q| / 2) cos(qx i) cos(qy j dy),
+
+    ``ky`` over the half-plane the r2c transform keeps and ``w_ky`` the number
+    of full-plane modes each stands for (1 at ``ky = 0`` and an even side's
+    Nyquist, else 2).  Two small matrix products: no transform to plan for a
+    table of a few hundred numbers (each coarse level of a start would plan
+    one), and not one of the half-space's applications, so the solvers'
+    operator count and its PETSc log event stay those of the solve.
+    """
+    qx = 2.0 * np.pi * np.fft.fftfreq(mx)
+    qy = 2.0 * np.pi * np.fft.rfftfreq(my, d=aspect)
+    ky = np.arange(qy.size)
+    weight = np.where((ky == 0) | ((my % 2 == 0) & (ky == my // 2)), 1.0, 2.0)
+    offsets = np.arange(-w, w + 1)
+    symbol = 0.5 * np.sqrt(qx[:, None] ** 2 + qy[None, :] ** 2)   # hypot is several times slower
+    table = (np.cos(np.outer(offsets, qx)) @ symbol
+             @ (weight[:, None] * np.cos(np.outer(qy * aspect, offsets)))) / (mx * my)
     table.flags.writeable = False
     return table
 
