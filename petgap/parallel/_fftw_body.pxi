@@ -300,9 +300,13 @@ cdef class ConvolutionPlans:
             raise RuntimeError(f"FFTW-MPI could not plan a {n0} x {n1} convolution")
 
     cdef int _check_multiplier(self, const double[::1] qx, const double[::1] qy,
-                               int power) except -1:
+                               int power, const double[::1] wrow=None) except -1:
+        """The multiplier's arrays against the slab (``wrow``, the rows' Hermitian
+        multiplicity, where a form is summed)."""
         if qx.shape[0] != self.n0 or qy.shape[0] != self.ln1:
             raise ValueError("wavevector arrays do not match the Fourier slab")
+        if wrow is not None and wrow.shape[0] != self.ln1:
+            raise ValueError("wrow does not match the Fourier slab")
         if power != 1 and power != -1:
             raise ValueError("power must be +1 or -1")
         return 0
@@ -486,11 +490,9 @@ cdef class ConvolutionPlans:
         Any other use of the buffers in between loses the half-made field
         (:meth:`end` then refuses).
         """
-        self._check_multiplier(qx, qy, power)
+        self._check_multiplier(qx, qy, power, wrow)
         if values.shape[0] != pidx.shape[0]:
             raise ValueError("pidx and values must have the same length")
-        if wrow.shape[0] != self.ln1:
-            raise ValueError("wrow does not match the Fourier slab")
         cdef double total
         cdef bint ok
         with nogil:
@@ -506,9 +508,7 @@ cdef class ConvolutionPlans:
               double scale, int power):
         """:meth:`begin_sparse` of the field in the real buffer (the first half of
         :meth:`apply`); the buffer is overwritten."""
-        self._check_multiplier(qx, qy, power)
-        if wrow.shape[0] != self.ln1:
-            raise ValueError("wrow does not match the Fourier slab")
+        self._check_multiplier(qx, qy, power, wrow)
         cdef double total
         with nogil:
             fftw_execute(self.rows_fwd)

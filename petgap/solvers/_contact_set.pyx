@@ -302,7 +302,7 @@ cdef object _direction_from_buffer(real_t kind, object pad_, const index_t[::1] 
 
 
 def step_sums(pad, const index_t[::1] pidx, gS, tS):
-    """Returns ``(sum r, sum g t, sum r t, sum t)`` over S with ``r = pad = K^{-1} P_S t``.
+    """Returns ``(sum g t, sum r t)`` over S with ``r = pad = K^{-1} P_S t``: a step length's sums.
 
     ``pad`` may be float32 with double ``gS`` and ``tS``: a double solve's direction
     imaged in single precision (:func:`petgap.solvers.pressure_cg.polonsky_keer`).
@@ -325,20 +325,17 @@ cdef object _step_sums(real_t kind, image_t image_kind, object pad_, const index
     cdef const real_t[::1] gS = gS_
     cdef const real_t[::1] tS = tS_
     cdef Py_ssize_t k, ns = pidx.shape[0]
-    cdef double r, t, sr = 0.0, sgt = 0.0, srt = 0.0, st = 0.0
+    cdef double t, sgt = 0.0, srt = 0.0
     cdef const image_t *pf
     if ns == 0:
-        return 0.0, 0.0, 0.0, 0.0
+        return 0.0, 0.0
     pf = &pad[0, 0]
     with nogil:
         for k in range(ns):
-            r = pf[pidx[k]]
             t = tS[k]
-            sr += r
             sgt += <double>gS[k] * t
-            srt += r * t
-            st += t
-    return sr, sgt, srt, st
+            srt += <double>pf[pidx[k]] * t
+    return sgt, srt
 
 
 def update(pS, tS, gS, double tau, double entry):

@@ -546,7 +546,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                 # The image r: one transform pair, from S to the whole slab (the
                 # recurrence below needs r everywhere), in the search's precision
                 half_space.apply_sparse(pidx, values, inverse=True, precision=image_precision)
-                _, sum_gt, sum_rt, _ = global_sums(comm, *_cs.step_sums(image, pidx, gS, tS))
+                sum_gt, sum_rt = global_sums(comm, *_cs.step_sums(image, pidx, gS, tS))
             if sum_gt > 0 or beta == 0.0:
                 break
             # S changed since the last restart, so t need not descend: restart

@@ -107,3 +107,28 @@ def test_wisdom_is_read_again_only_when_the_file_changed(comm, mpi_tmp_path, mon
     Grid((20, 18), comm=comm, planner="estimate")
     # rank 0 reads, then broadcasts what it read
     assert comm.allgather((first, len(reads))) == [(1, 2)] + [(0, 0)] * (comm.size - 1)
+
+
+@pytest.mark.parametrize("precision", ["double", "single"])
+def test_a_multiplier_that_does_not_fit_the_slab_is_refused(comm, precision):
+    """Wavevectors, row multiplicities and the power are checked before any transform runs."""
+    grid = Grid((24, 18), comm=comm, planner="estimate", precision=precision)
+    plans, qx, qy, w = grid._convolution, grid.qx, grid.qy, grid.hermitian_weight
+    pidx = np.zeros(1, dtype=np.int32)
+    values = np.ones(1, dtype=grid.dtype)
+    calls = {"apply": lambda qx, qy, w, p: plans.apply(qx, qy, 1.0, p),
+             "apply_sparse": lambda qx, qy, w, p: plans.apply_sparse(pidx, values, qx, qy, 1.0, p),
+             "begin": lambda qx, qy, w, p: plans.begin(qx, qy, w, 1.0, p),
+             "begin_sparse": lambda qx, qy, w, p: plans.begin_sparse(pidx, values, qx, qy, w,
+                                                                      1.0, p)}
+    for name, call in calls.items():
+        with pytest.raises(ValueError, match="wavevector arrays do not match"):
+            call(qx[:-1], qy, w, 1)
+        with pytest.raises(ValueError, match="wavevector arrays do not match"):
+            call(qx, np.append(qy, 0.0), w, 1)
+        with pytest.raises(ValueError, match="power must be"):
+            call(qx, qy, w, 2)
+        if name.startswith("begin"):
+            with pytest.raises(ValueError, match="wrow does not match"):
+                call(qx, qy, np.append(w, 1.0), 1)
+        call(qx, qy, w, -1)   # the same arrays, fitting, are taken

@@ -192,7 +192,7 @@ def test_sums_over_s():
     (r32, a32), (r64, a64) = both_precisions("step_sums")
     pad, pidx, g, t = a64
     r = pad.ravel()[pidx]
-    for got, want, terms in zip(r32, r64, [r, g * t, r * t, t]):
+    for got, want, terms in zip(r32, r64, [g * t, r * t]):
         assert_sum(got, want, np.abs(terms).sum())
 
 
@@ -285,8 +285,7 @@ def test_double_precision_matches_numpy():
 
     pad, pidx, gS, tS = _step_sums(_rng(12))
     r = pad.ravel()[pidx]
-    np.testing.assert_allclose(cs.step_sums(pad, pidx, gS, tS),
-                               [r.sum(), gS @ tS, r @ tS, tS.sum()], rtol=1e-12)
+    np.testing.assert_allclose(cs.step_sums(pad, pidx, gS, tS), [gS @ tS, r @ tS], rtol=1e-12)
 
     pS, tS, gS, tau, entry = _update(_rng(13))
     expected = pS - tau * tS
