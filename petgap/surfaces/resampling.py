@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
-from petgap.parallel._fftw_mpi import weighted_power
+from petgap.parallel.grid import weighted_power
 
 __all__ = ["BandSpectrum", "band_spectrum", "resample"]
 

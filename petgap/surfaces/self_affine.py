@@ -40,7 +40,7 @@ import warnings
 import numpy as np
 from mpi4py import MPI
 
-from petgap.parallel._fftw_mpi import weighted_power
+from petgap.parallel.grid import weighted_power
 
 #: Shortest wavelength, in pixels, that counts as resolved; below it a warning is issued.
 RESOLVED_PIXELS = 4.0
@@ -116,8 +116,11 @@ def self_affine(grid, hurst, lambda_min, lambda_max=None, *, rms_slope=None,
 
     Returns
     -------
-    ndarray of float64, shape ``grid.local_shape``
-        Heights on this rank's rows ``grid.x_slice``; zero mean.
+    ndarray of the grid's real dtype, shape ``grid.local_shape``
+        Heights on this rank's rows ``grid.x_slice``; zero mean.  On a
+        single-precision grid the amplitudes are drawn and filtered in double
+        and rounded once into the grid's buffer, so the surface is the one a
+        double grid gives, to single-precision round-off.
 
     Raises
     ------
@@ -129,7 +132,8 @@ def self_affine(grid, hurst, lambda_min, lambda_max=None, *, rms_slope=None,
     -----
     Memory: nothing beyond the grid's FFT buffers (16 bytes per point) and the
     returned slab (8 bytes per point), 24 bytes per point in all, as
-    ``benchmarks/surface_memory.py`` measures.
+    ``benchmarks/surface_memory.py`` measures; half of each on a
+    single-precision grid.
     """
     hurst = _check_real("hurst", hurst, lambda v: 0 < v < 1, "0 < hurst < 1")
     lambda_min = _check_positive("lambda_min", lambda_min)
@@ -166,7 +170,7 @@ def self_affine(grid, hurst, lambda_min, lambda_max=None, *, rms_slope=None,
     real = grid.backward()
     # One pass: the rescaling to the target and the 1 / N of the inverse FFT,
     # straight into the array we return (grid.real is shared scratch).
-    heights = np.empty(grid.local_shape)
+    heights = np.empty(grid.local_shape, dtype=grid.dtype)
     np.multiply(real, target / (current * grid.npoints), out=heights)
     return heights
 
@@ -195,11 +199,13 @@ def _fill_spectrum(grid, hurst, lambda_min, lambda_max, seed):
     qx2 = grid.qx ** 2
     fourier = grid.fourier
     half = (nx - 1) // 2
+    # a single-precision buffer's rows are drawn and filtered in a double row first
+    drawn = None if fourier.dtype == np.complex128 else np.empty(nx, dtype=np.complex128)
     for j, n in enumerate(range(grid.ky_slice.start, grid.ky_slice.stop)):
-        row = fourier[j]
         if grid.qy[j] > q2:  # the whole row is above the cutoff: nothing to draw
-            row[:] = 0.0
+            fourier[j] = 0.0
             continue
+        row = fourier[j] if drawn is None else drawn
         rng = np.random.Generator(np.random.Philox(key=np.array([seed, n], dtype=np.uint64)))
         rng.standard_normal(out=row.view(np.float64))
         if n == 0 or (ny % 2 == 0 and n == ny // 2):
@@ -209,6 +215,8 @@ def _fill_spectrum(grid, hurst, lambda_min, lambda_max, seed):
             if nx % 2 == 0:
                 row[nx // 2] = np.sqrt(2.0) * row[nx // 2].real
         row *= np.sqrt(psd_shape(np.sqrt(qx2 + grid.qy[j] ** 2), hurst, q1, q2))
+        if drawn is not None:
+            fourier[j] = drawn
     return fourier  # q = 0 is zero already: psd_shape(0) = 0
 
 

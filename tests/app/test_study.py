@@ -80,6 +80,27 @@ def test_resample_keeps_the_band_exactly(comm):
     assert np.max(np.abs(other[::2, ::2] - h_global)) > 0.1 * scale
 
 
+def test_resample_onto_and_from_single_precision_grids(comm):
+    """A band taken on a single-precision grid, and put on one, is the double band to
+    float32 round-off."""
+    source = Grid((48, 40), size=SIZE, comm=comm, planner="estimate", wisdom=False)
+    single = Grid((48, 40), size=SIZE, comm=comm, planner="estimate", wisdom=False,
+                  precision="single")
+    fine = Grid((96, 80), size=SIZE, comm=comm, planner="estimate", wisdom=False,
+                precision="single")
+    h = self_affine(source, 0.7, LAMBDA_MIN, 12.0, rms_slope=0.1, seed=5)
+    band = resampling.band_spectrum(source, h, LAMBDA_MIN)
+    band_single = resampling.band_spectrum(single, h, LAMBDA_MIN)
+    h_fine = resampling.resample(band, fine)
+    h_fine_global = gather_all(fine, h_fine)
+    h_global = gather_all(source, h)
+    scale = np.abs(band.coefficients).max()
+    assert band_single.coefficients.shape == band.coefficients.shape
+    assert np.max(np.abs(band_single.coefficients - band.coefficients)) < 2e-6 * scale
+    assert h_fine.dtype == np.float32
+    assert np.max(np.abs(h_fine_global[::2, ::2] - h_global)) < 2e-6 * np.abs(h_global).max()
+
+
 def test_resample_refuses_a_grid_that_cannot_hold_the_band(comm):
     source = Grid((48, 40), size=SIZE, comm=comm, planner="estimate", wisdom=False)
     h = self_affine(source, 0.7, LAMBDA_MIN, 12.0, rms_slope=0.1, seed=5)

@@ -207,6 +207,24 @@ def test_same_surface_on_one_and_two_ranks(comm, shape):
     np.testing.assert_allclose(h, reference, rtol=0, atol=1e-13 * np.abs(reference).max())
 
 
+@pytest.mark.filterwarnings("ignore:lambda_min")
+@pytest.mark.parametrize("shape", SHAPES)
+def test_a_single_precision_grid_gets_the_same_surface(comm, shape):
+    """Drawn and filtered in double, rounded once: the double grid's surface to float32
+    round-off, at the same rms slope, on any number of ranks."""
+    single = Grid(shape, size=SIZE, comm=comm, planner="estimate", precision="single")
+    double = make_grid(shape, MPI.COMM_SELF)
+    kwargs = dict(hurst=0.7, lambda_min=resolved(double, 2), lambda_max=3.0, rms_slope=0.1,
+                  seed=5)
+    h = self_affine(single, **kwargs)
+    reference = self_affine(double, **kwargs)
+    slope = statistics(single, h).rms_slope
+    assert h.dtype == np.float32 and h.shape == single.local_shape
+    np.testing.assert_allclose(h, reference[single.x_slice], rtol=0,
+                               atol=2e-6 * np.abs(reference).max())
+    assert slope == pytest.approx(0.1, rel=2e-6)
+
+
 THREE_RANK_SCRIPT = """
 import sys
 import warnings
