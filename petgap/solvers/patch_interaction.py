@@ -109,6 +109,9 @@ class PatchInteraction:
         qy = 2 * np.pi * np.fft.rfftfreq(self.my, d=grid.Ly / self.my)
         q = np.hypot(qx[:, None], qy[None, :])
         cell = (grid.nx / self.mx) * (grid.ny / self.my)
+        #: pixels in a block (``block^2``, or more where the blocks grew beyond
+        #: :data:`MAX_SIDE` a side)
+        self.block_area = cell
         symbol = np.zeros_like(q)
         np.divide(2.0 / (contact_modulus * cell), q, out=symbol, where=q > 0)
         self._root = np.sqrt(symbol)   # F^{1/2}

@@ -44,7 +44,8 @@ follows each step is not: while the contact set is still moving it shifts the
 pressure of many small patches at once, which the projection then clips, and
 on surfaces with patches of a few pixels the set can swing without converging.
 So the term enters only in an iteration after one that changed at most
-:data:`SETTLED_FRACTION` of ``S``.  On a set that has settled a step with it is
+:data:`SETTLED_FRACTION` of ``S`` (:func:`settled_fraction`: less where the blocks are
+larger than 32 pixels).  On a set that has settled a step with it is
 nearly a Newton step and the residual after it falls (the residual is a
 maximum over points and may rise a little after a good step).  Where it rises
 by more than :data:`RISE_FACTOR`, the step moved more of the set than it
@@ -178,7 +179,7 @@ from petgap.solvers.patch_interaction import BLOCK, patch_interaction
 RESTART_FRACTION = 0.003
 #: The patch interaction enters the preconditioner only in an iteration after
 #: one that changed at most this fraction of the contact set (points clipped or
-#: entering).  A step with it after which the residual is above ``RISE_FACTOR``
+#: entering), with blocks of 32 pixels (less with larger ones: :func:`settled_fraction`).  A step with it after which the residual is above ``RISE_FACTOR``
 #: times the residual before it withdraws it, and it enters again only after
 #: an iteration that changed at most ``WITHDRAWN_FACTOR`` times the fraction
 #: that let it in; see "Preconditioning" in the module docstring.  The residual
@@ -187,6 +188,7 @@ RESTART_FRACTION = 0.003
 SETTLED_FRACTION = 0.01
 RISE_FACTOR = 1.2
 WITHDRAWN_FACTOR = 0.1
+
 #: A single-precision solve stops as ``"stalled_round_off"`` when its residual
 #: has not fallen below ``STALL_FACTOR`` times its best for ``STALL_ITERATIONS``
 #: iterations (see "Precision" in the module docstring).  Far from the floor
@@ -197,6 +199,20 @@ STALL_FACTOR = 0.9
 #: double grid (see "Precision" in the module docstring): double, so that results
 #: depend on the number of ranks by round-off only.
 SEARCH_PRECISION = "double"
+
+
+def settled_fraction(far):
+    """The fraction of ``S`` an iteration may change for the patch interaction ``far`` to enter.
+
+    :data:`SETTLED_FRACTION` for blocks of :data:`petgap.solvers.patch_interaction.BLOCK`
+    pixels a side or smaller, and that over the ratio of the block's area to theirs for
+    larger ones (the 64-pixel blocks of 16384^2): a step with the term shifts the
+    pressure of whole blocks, and a larger block moves more of the set per block it
+    shifts, so the set must have settled further for the step to be safe.
+    """
+    if far is None:
+        return SETTLED_FRACTION
+    return SETTLED_FRACTION * min(1.0, BLOCK * BLOCK / far.block_area)
 
 
 def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
@@ -381,7 +397,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     far = (patch_interaction(half_space, edge_correction, interaction_block)
            if edge is not None and load else None)
     settled = far_used = False   # S changed little in the last iteration; V y applied in it
-    admit, far_from = SETTLED_FRACTION, np.inf   # what "little" is; the residual V y was used at
+    # what "little" is (smaller for blocks larger than 32 pixels); the residual V y was used at
+    admit, far_from = settled_fraction(far), np.inf
     if contact is None and not periodic:
         contact = ContactSet.everywhere(mask, padded_width, target, dtype=dtype)  # C P0 is not zero
     if contact is None:
