@@ -54,6 +54,12 @@ def weighted_power(c, qx, qy, wrow, power):
     return binding.weighted_power(c, qx, qy, wrow, power)
 
 
+def hermitian_weight(rows, ny):
+    """The full-plane modes each half-plane row ``rows`` of an r2c transform along ``ny``
+    points stands for: 1 for ``ky = 0`` and an even ``ny``'s Nyquist row, else 2."""
+    return np.where((rows == 0) | ((ny % 2 == 0) & (rows == ny // 2)), 1.0, 2.0)
+
+
 def row_blocks(nrows, points=1 << 16, ncols=None):
     """Row slices of a slab of about ``points`` values each (rows of ``ncols``, 1024 if
     None), to bound the temporaries of a pass over it."""
@@ -174,9 +180,8 @@ class Grid:
         self.qx = 2 * np.pi * m / lx
         #: Wavevector components along y for the local Fourier rows.
         self.qy = 2 * np.pi * np.arange(l1s, l1s + ln1, dtype=float) / ly
-        n = np.arange(l1s, l1s + ln1)
         #: Number of full-plane modes each local half-plane row stands for.
-        self.hermitian_weight = np.where((n == 0) | ((ny % 2 == 0) & (n == ny // 2)), 1.0, 2.0)
+        self.hermitian_weight = hermitian_weight(np.arange(l1s, l1s + ln1), ny)
 
     # ------------------------------------------------------------------ sizes
     @property

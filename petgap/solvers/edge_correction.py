@@ -58,6 +58,7 @@ import functools
 import numpy as np
 from mpi4py import MPI
 
+from petgap.parallel.grid import hermitian_weight
 from petgap.parallel.log import SET_UPDATE_EVENT, event
 from petgap.solvers import _contact_set as _cs
 from petgap.solvers.contact_set import INDEX
@@ -109,8 +110,7 @@ def _unit_kernel_window(mx, my, aspect, w):
     """
     qx = 2.0 * np.pi * np.fft.fftfreq(mx)
     qy = 2.0 * np.pi * np.fft.rfftfreq(my, d=aspect)
-    ky = np.arange(qy.size)
-    weight = np.where((ky == 0) | ((my % 2 == 0) & (ky == my // 2)), 1.0, 2.0)
+    weight = hermitian_weight(np.arange(qy.size), my)
     offsets = np.arange(-w, w + 1)
     symbol = 0.5 * np.sqrt(qx[:, None] ** 2 + qy[None, :] ** 2)   # hypot is several times slower
     table = (np.cos(np.outer(offsets, qx)) @ symbol
