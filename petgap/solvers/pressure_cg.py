@@ -179,8 +179,9 @@ from petgap.solvers.patch_interaction import BLOCK, patch_interaction
 RESTART_FRACTION = 0.003
 #: The patch interaction enters the preconditioner only in an iteration after
 #: one that changed at most this fraction of the contact set (points clipped or
-#: entering), with blocks of 32 pixels (less with larger ones: :func:`settled_fraction`).  A step with it after which the residual is above ``RISE_FACTOR``
-#: times the residual before it withdraws it, and it enters again only after
+#: entering), with blocks of 32 pixels (less with larger ones:
+#: :func:`settled_fraction`).  A step with it after which the residual is above
+#: ``RISE_FACTOR`` times the residual before it withdraws it, and it enters again only after
 #: an iteration that changed at most ``WITHDRAWN_FACTOR`` times the fraction
 #: that let it in; see "Preconditioning" in the module docstring.  The residual
 #: is a maximum over points, not the energy norm the conjugate gradients
@@ -188,7 +189,6 @@ RESTART_FRACTION = 0.003
 SETTLED_FRACTION = 0.01
 RISE_FACTOR = 1.2
 WITHDRAWN_FACTOR = 0.1
-
 #: A single-precision solve stops as ``"stalled_round_off"`` when its residual
 #: has not fallen below ``STALL_FACTOR`` times its best for ``STALL_ITERATIONS``
 #: iterations (see "Precision" in the module docstring).  Far from the floor
@@ -481,6 +481,9 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             scale = target * n / total if load else 1.0
             delta, fresh = 0.0, True
             continue
+        # under load control, the kept direction's sum over the present S (its mean is
+        # taken off the new one: "Step length" in the module docstring)
+        old_t_sum = float(tS.sum(dtype=np.float64)) if load and delta != 0.0 else 0.0
         if preconditioned:
             # z = P_S K P_S g (one pair, from S to S), made zero-mean on S
             # under load control
@@ -494,13 +497,12 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
                 half_space.apply_sparse(pidx, gS, inverse=False, gathered=zS)
             if edge is None:
                 sum_z, kz, g_sq, t_sum = global_sums(comm, *_cs.gap_sums(zS, gS), g_norm,
-                                                     _direction_sum(tS, load and delta != 0.0))
+                                                     old_t_sum)
                 gz = kz
             else:
                 # z less theta kappa g, if that is still positive on the gap
                 sum_z, kz, g_sq, t_sum, sum_kg, sum_kgg = global_sums(
-                    comm, *_cs.gap_sums(zS, gS), g_norm,
-                    _direction_sum(tS, load and delta != 0.0), *edge.sums(gS, idx))
+                    comm, *_cs.gap_sums(zS, gS), g_norm, old_t_sum, *edge.sums(gS, idx))
                 gz = kz - edge.theta * sum_kgg
                 use_far = gz > 0 and far is not None and settled
                 if use_far != far_used:
@@ -540,7 +542,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
             g_norm = gz
             zS_, zshift_ = zS, zshift
         else:
-            g_norm, t_sum = global_sums(comm, g_norm, _direction_sum(tS, load and delta != 0.0))
+            g_norm, t_sum = global_sums(comm, g_norm, old_t_sum)
             stiffness = 1.0
             zS_, zshift_ = gS, 0.0
         beta = delta * g_norm / g_old
@@ -618,12 +620,6 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         solver="pcg-pressure", iterations=it, wall_time=timer(), history=history,
         operator_applications=problem.operator_applications - start_ops, residuals=residuals,
         start=start, start_time=start_time)
-
-
-def _direction_sum(tS, wanted):
-    """The old direction's sum over the present S where ``wanted`` (load control, and the
-    old direction kept: its mean is taken off the new one), else 0; in double."""
-    return float(tS.sum(dtype=np.float64)) if wanted else 0.0
 
 
 def _in_single(low, values):
