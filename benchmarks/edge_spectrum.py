@@ -29,6 +29,7 @@ from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.problem import ContactProblem, Load
 from petgap.parallel.grid import Grid
 from petgap.solvers.pressure_cg import polonsky_keer
+from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
 
 
@@ -44,7 +45,8 @@ def spectrum(n, thetas):
     grid = Grid((n, n), comm=MPI.COMM_SELF, planner="estimate", wisdom=False)
     h = self_affine(grid, 0.8, 32.0, n / 2, rms_slope=0.1, seed=1)
     problem = ContactProblem(grid, h, ElasticHalfSpace(grid, 1.0))
-    solution = polonsky_keer(problem, Load(0.002), tolerance=1e-10, edge_correction=0.0)
+    solution = polonsky_keer(problem, Load(0.002),
+                             SolverSettings(tolerance=1e-10, edge_correction=0.0))
     rows, cols = np.nonzero(solution.pressure > 0)
     m = len(rows)
     dx, dy = (rows[:, None] - rows[None, :]) % n, (cols[:, None] - cols[None, :]) % n

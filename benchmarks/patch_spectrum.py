@@ -32,6 +32,7 @@ from petgap.parallel.grid import Grid
 from petgap.solvers.edge_correction import EDGE_CORRECTION, EdgeCorrection
 from petgap.solvers.patch_interaction import patch_interaction
 from petgap.solvers.pressure_cg import polonsky_keer
+from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
 
 
@@ -40,7 +41,7 @@ def lanczos_extremes(n, iterations, interaction):
     h = self_affine(grid, 0.8, 32.0, n / 2, rms_slope=0.1, seed=1)
     half_space = ElasticHalfSpace(grid, 1.0)
     problem = ContactProblem(grid, h, half_space)
-    solution = polonsky_keer(problem, Load(0.002), tolerance=1e-8)
+    solution = polonsky_keer(problem, Load(0.002), SolverSettings(tolerance=1e-8))
     mask = (solution.pressure > 0).astype(np.uint8)
     idx = np.flatnonzero(mask).astype(np.int32)
     del solution

@@ -38,6 +38,7 @@ def main():
     import petgap
     from petgap.solvers import coarse, pressure_cg
     from petgap.solvers.patch_interaction import BLOCK
+    from petgap.solvers.settings import SolverSettings
 
     petgap_rule = pressure_cg.RESTART_FRACTION
     rules = [("Polonsky-Keer", 0.0, 0), (f"{petgap_rule:g}", petgap_rule, 0),
@@ -57,8 +58,8 @@ def main():
                 for _, fraction, block in rules:
                     pressure_cg.RESTART_FRACTION = fraction
                     started = time.perf_counter()
-                    s = pressure_cg.polonsky_keer(problem, petgap.Load(0.002), tolerance=1e-8,
-                                                  interaction_block=block)
+                    s = pressure_cg.polonsky_keer(problem, petgap.Load(0.002), SolverSettings(
+                        tolerance=1e-8, interaction_block=block))
                     wall = time.perf_counter() - started
                     mark = "" if s.converged else f" ({s.reason})"
                     cells.append(f"{s.iterations} / {s.operator_applications} "

@@ -79,6 +79,7 @@ def main():
     from petgap.parallel.log import get_logger
     from petgap.solvers.edge_correction import EDGE_CORRECTION
     from petgap.solvers.patch_interaction import BLOCK
+    from petgap.solvers.settings import SolverSettings
 
     theta = EDGE_CORRECTION if args.edge_correction is None else args.edge_correction
     block = BLOCK if args.interaction_block is None else args.interaction_block
@@ -112,10 +113,9 @@ def main():
                 fractions = []
                 for coarse_start in (True, False):
                     before, far_before, back = dropped.count, dropped_far.count, withdrawn.count
-                    s = pressure_cg.polonsky_keer(problem, control, tolerance=1e-8,
-                                                  coarse_start=coarse_start,
-                                                  edge_correction=theta,
-                                                  interaction_block=block)
+                    s = pressure_cg.polonsky_keer(problem, control, SolverSettings(
+                        tolerance=1e-8, coarse_start=coarse_start, edge_correction=theta,
+                        interaction_block=block))
                     solves += 1
                     drops += dropped.count > before
                     far_drops += dropped_far.count > far_before

@@ -58,6 +58,7 @@ from petsc4py import PETSc
 from petgap.mechanics.problem import Indentation, Load, MeanGap
 from petgap.solvers.free_boundary import solve_on_cell
 from petgap.solvers.mixed_precision import solve_mixed
+from petgap.solvers.settings import SolverSettings
 from petgap.solvers.pressure_cg import (full_contact_state, solve_mean_gap_by_indentation,
                                         touching_state)
 from petgap.solvers.tao import (PETGAP_TYPES, petsc_options, pressure_solver_options,
@@ -149,9 +150,10 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
     if not periodic and isinstance(control, MeanGap):
         with petsc_options(options):
             return solve_mean_gap_by_indentation(
-                problem, control, tolerance=tolerance, max_iterations=max_iterations,
-                initial_pressure=None if initial is None else initial.pressure, monitor=monitor,
-                edge_correction=pressure_solver_options()["edge_correction"])
+                problem, control, SolverSettings(
+                    tolerance=tolerance, max_iterations=max_iterations,
+                    edge_correction=pressure_solver_options()["edge_correction"]),
+                initial_pressure=None if initial is None else initial.pressure, monitor=monitor)
     checked = 0
     if isinstance(control, Load) and not adhesive and periodic:
         before = problem.operator_applications
@@ -163,8 +165,10 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
     if precision == "mixed":
         with petsc_options(options):
             settings = pressure_solver_options()
-        solution = solve_mixed(problem, control, tolerance=tolerance,
-                               max_iterations=max_iterations, monitor=monitor, **settings,
+        solution = solve_mixed(problem, control, SolverSettings(
+                                   tolerance=tolerance, max_iterations=max_iterations,
+                                   **{"search_precision": "single", **settings}),
+                               monitor=monitor,
                                initial_pressure=None if initial is None else initial.pressure)
     else:
         solution = _solve(problem, control, tao_type, adhesive, tolerance, max_iterations,

@@ -89,6 +89,7 @@ from petgap.parallel.collective import global_sums
 from petgap.parallel.log import GAP_CG_EVENT, event
 from petgap.solvers import _kernels as _k
 from petgap.solvers.convergence import Timer, judge
+from petgap.solvers.settings import SolverSettings
 
 
 def _pass(kernel, *args):
@@ -130,17 +131,17 @@ def _project_mean(grid, g, target, h, padded, comm):
     _pass(_k.project_and_load, g, mu, h, padded)
 
 
-def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_gap=None,
-           monitor=None, refresh_interval=50):
+def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, monitor=None,
+           refresh_interval=50):
     """Solve hard-wall or adhesive contact on the gap, under load or mean-gap control.
 
     Parameters
     ----------
     problem : petgap.mechanics.problem.ContactProblem
     control : Load or MeanGap
-    tolerance : float
-        Target for the largest KKT stress violation over ``h0' E*``.
-    max_iterations : int
+    settings : petgap.solvers.settings.SolverSettings
+        Tolerance (of the largest KKT stress violation over ``h0' E*``) and
+        iteration limit.
     initial_gap : ndarray, optional
         Warm start (copied and made feasible).
     monitor : callable, optional
@@ -153,6 +154,7 @@ def gap_cg(problem, control, *, tolerance=1e-8, max_iterations=10000, initial_ga
     petgap.mechanics.problem.ContactSolution
         ``history`` holds the residuals; ``reason`` says why it stopped.
     """
+    tolerance, max_iterations = settings.tolerance, settings.max_iterations
     grid, comm = problem.grid, problem.grid.comm
     h = problem.topography
     half_space = problem.half_space

@@ -24,11 +24,9 @@ import numpy as np
 from petgap.io.scene import SINGLE_TOLERANCE_FLOOR
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
-from petgap.solvers.coarse import COARSE_TOLERANCE
 from petgap.solvers.convergence import Timer
-from petgap.solvers.edge_correction import EDGE_CORRECTION
-from petgap.solvers.patch_interaction import BLOCK
 from petgap.solvers.pressure_cg import polonsky_keer
+from petgap.solvers.settings import SolverSettings
 
 
 def single_precision_twin(problem):
@@ -50,16 +48,14 @@ def single_precision_twin(problem):
                           problem.half_space.on_grid(sgrid), problem.interaction)
 
 
-def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monitor=None,
-                coarse_start=True, initial_pressure=None, edge_correction=EDGE_CORRECTION,
-                interaction_block=BLOCK, coarse_tolerance=COARSE_TOLERANCE,
-                search_precision="single"):
+def solve_mixed(problem, control, settings=SolverSettings(search_precision="single"), *,
+                monitor=None, initial_pressure=None):
     """Solve ``problem`` (double precision) under load or mean gap, first in single.
 
     The single-precision solve runs to ``max(tolerance, SINGLE_TOLERANCE_FLOOR)``
     from the coarse start (or from ``initial_pressure``, a sweep's previous step);
     the double solve to ``tolerance`` from its pressure, with its search in
-    ``search_precision``.
+    ``settings.search_precision``.
     Whatever the single solve ends with (converged or not) is only a start: the
     double solve's verdict is the result's.  The result's iterations, operator
     applications and history are the sums over both solves (the coarse start's
@@ -69,12 +65,12 @@ def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monit
     if not isinstance(control, (Load, MeanGap)):
         raise TypeError(f"mixed precision solves load or mean-gap control, not {control!r}")
     timer = Timer()
+    tolerance, max_iterations = settings.tolerance, settings.max_iterations
     twin = single_precision_twin(problem)
-    single = polonsky_keer(twin, control, tolerance=max(tolerance, SINGLE_TOLERANCE_FLOOR),
-                           max_iterations=max_iterations, monitor=monitor,
-                           coarse_start=coarse_start, edge_correction=edge_correction,
-                           interaction_block=interaction_block,
-                           coarse_tolerance=coarse_tolerance,
+    single = polonsky_keer(twin, control, settings.but(
+                               tolerance=max(tolerance, SINGLE_TOLERANCE_FLOOR),
+                               search_precision="double"),
+                           monitor=monitor,
                            initial_pressure=None if initial_pressure is None
                            else initial_pressure.astype(np.float32))
     start_ops = single.operator_applications
@@ -83,11 +79,9 @@ def solve_mixed(problem, control, *, tolerance=1e-8, max_iterations=10000, monit
                    f"(KKT {single.kkt_gap:.1e}); {single.start}")
     single_iterations, single_history = single.iterations, list(single.history)
     del twin, single
-    double = polonsky_keer(problem, control, tolerance=tolerance,
-                           max_iterations=max(max_iterations - single_iterations, 1),
-                           initial_pressure=pressure, monitor=monitor,
-                           edge_correction=edge_correction, interaction_block=interaction_block,
-                           search_precision=search_precision)
+    double = polonsky_keer(problem, control, settings.but(
+                               max_iterations=max(max_iterations - single_iterations, 1)),
+                           initial_pressure=pressure, monitor=monitor)
     del pressure
     double.start = f"{description}; refined in double from its pressure"
     double.iterations += single_iterations

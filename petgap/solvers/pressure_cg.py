@@ -171,6 +171,7 @@ from petgap.solvers.contact_set import INDEX, ContactSet
 from petgap.solvers.convergence import Timer, judge
 from petgap.solvers.edge_correction import EDGE_CORRECTION, EdgeCorrection
 from petgap.solvers.patch_interaction import BLOCK, patch_interaction
+from petgap.solvers.settings import SolverSettings
 
 #: In an iteration without the patch interaction in the preconditioner,
 #: conjugacy is dropped (a steepest-descent restart) when more points than this
@@ -215,10 +216,8 @@ def settled_fraction(far):
     return SETTLED_FRACTION * min(1.0, BLOCK * BLOCK / far.block_area)
 
 
-def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
-                  initial_pressure=None, monitor=None, preconditioned=True, coarse_start=True,
-                  edge_correction=EDGE_CORRECTION, interaction_block=BLOCK,
-                  coarse_tolerance=coarse.COARSE_TOLERANCE, search_precision=SEARCH_PRECISION):
+def polonsky_keer(problem, control, settings=SolverSettings(), *, initial_pressure=None,
+                  monitor=None):
     """Solve non-adhesive contact under load or mean-gap control.
 
     Parameters
@@ -226,38 +225,13 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     problem : petgap.mechanics.problem.ContactProblem
         Must be non-adhesive.
     control : Load or MeanGap
-    tolerance : float
-        Target for the gap KKT residual ``max|g on S|, max(-g off S)`` over ``h0``.
-    max_iterations : int
+    settings : petgap.solvers.settings.SolverSettings
+        Tolerance (of the gap KKT residual ``max|g on S|, max(-g off S)`` over
+        ``h0``), iteration limit, start and preconditioner.
     initial_pressure : ndarray, optional
         Warm start (e.g. the previous step of a sweep); copied.
     monitor : callable, optional
         ``monitor(iteration, residual)`` on every rank at every iteration.
-    preconditioned : bool
-        Precondition the conjugate gradients with the stiffness restricted to
-        the contact set, ``z = P_S K P_S g`` (see the module docstring).
-    coarse_start : bool
-        Without ``initial_pressure``, start from the solution on a coarser
-        grid where the shape allows one (:mod:`petgap.solvers.coarse`); recorded in
-        the solution's ``start``.
-    edge_correction : float
-        The share ``theta`` of the contact-edge term taken off the
-        preconditioner (:mod:`petgap.solvers.edge_correction`); 0 keeps the
-        plain restricted stiffness.  Passed on to the coarse start.
-    interaction_block : int
-        Side in pixels of the blocks over which the preconditioner models the
-        elastic interaction between contact patches
-        (:mod:`petgap.solvers.patch_interaction`); 0 leaves it out.  Made only
-        with the edge correction, under load control on periodic cells.  Passed
-        on to the coarse start.
-    coarse_tolerance : float
-        The tolerance the coarse start's solves stop at (or ``tolerance`` if
-        that is looser; :data:`petgap.solvers.coarse.COARSE_TOLERANCE`).
-    search_precision : {"single", "double"}
-        The precision of the two transforms that find the step -- the
-        preconditioner's and the direction's image -- on a double grid (see
-        "Precision" in the module docstring); a single grid does everything in
-        single.  :data:`SEARCH_PRECISION` by default.
 
     Returns
     -------
@@ -266,20 +240,9 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     if problem.interaction.adhesive:
         raise ValueError("the Polonsky-Keer solver handles non-adhesive contact only; "
                          "use a gap-based solver for adhesion")
-    if not 0 <= edge_correction < 1:
-        raise ValueError(f"edge_correction = {edge_correction} is not allowed: the share of "
-                         f"the contact-edge term taken off the preconditioner is in [0, 1)")
-    if not (isinstance(interaction_block, (int, np.integer)) and interaction_block >= 0):
-        raise ValueError(f"interaction_block = {interaction_block!r} is not allowed: the side "
-                         f"of the patch interaction's blocks is a whole number of pixels >= 1, "
-                         f"or 0 to leave the interaction out")
-    if search_precision not in ("single", "double"):
-        raise ValueError(f"search_precision = {search_precision!r} is not allowed: need "
-                         f"'single' or 'double'")
-    if not (isinstance(coarse_tolerance, (int, float, np.floating))
-            and 0 < coarse_tolerance < np.inf):
-        raise ValueError(f"coarse_tolerance = {coarse_tolerance!r} is not allowed: the tolerance "
-                         f"of the coarse start's solves is a positive number")
+    tolerance, max_iterations = settings.tolerance, settings.max_iterations
+    edge_correction, interaction_block = settings.edge_correction, settings.interaction_block
+    search_precision = settings.search_precision
     grid, comm = problem.grid, problem.grid.comm
     h = problem.topography
     dtype = h.dtype   # the grid's precision: every field and set vector in it, sums in double
@@ -332,10 +295,8 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     # the step length by Parseval, the image completed only where needed
     split = problem.half_space.splits_transforms
     start = "warm" if initial_pressure is not None else ""
-    if initial_pressure is None and coarse_start:
-        initial_pressure, start = coarse_start_pressure(problem, control, tolerance, max_iterations,
-                                                        edge_correction, interaction_block,
-                                                        coarse_tolerance)
+    if initial_pressure is None and settings.coarse_start:
+        initial_pressure, start = coarse_start_pressure(problem, control, settings)
     start_time = timer()
     if initial_pressure is None:
         start = "; ".join(filter(None, [
@@ -393,7 +354,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
     watch_stall = dtype == np.float32
     best, best_it = np.inf, 0
     edge = (EdgeCorrection(half_space, mask, edge_correction)
-            if preconditioned and edge_correction > 0 else None)
+            if settings.preconditioned and edge_correction > 0 else None)
     far = (patch_interaction(half_space, edge_correction, interaction_block)
            if edge is not None and load else None)
     settled = far_used = False   # S changed little in the last iteration; V y applied in it
@@ -484,7 +445,7 @@ def polonsky_keer(problem, control, *, tolerance=1e-8, max_iterations=10000,
         # under load control, the kept direction's sum over the present S (its mean is
         # taken off the new one: "Step length" in the module docstring)
         old_t_sum = float(tS.sum(dtype=np.float64)) if load and delta != 0.0 else 0.0
-        if preconditioned:
+        if settings.preconditioned:
             # z = P_S K P_S g (one pair, from S to S), made zero-mean on S
             # under load control
             zS = contact.z
@@ -685,9 +646,7 @@ def _uniform_first_iteration(problem, mask, padded_width, target, p, tolerance, 
     return contact, target * grid.npoints / sum_p, delta, gz, residual
 
 
-def coarse_start_pressure(problem, control, tolerance, max_iterations,
-                          edge_correction=EDGE_CORRECTION, interaction_block=BLOCK,
-                          coarse_tolerance=coarse.COARSE_TOLERANCE):
+def coarse_start_pressure(problem, control, settings):
     """A fine-grid pressure to start from: the solution on a coarser grid, prolonged.
 
     The coarse problem and the transfers are :mod:`petgap.solvers.coarse`'s;
@@ -701,11 +660,9 @@ def coarse_start_pressure(problem, control, tolerance, max_iterations,
     coarse_problem = coarse.coarse_problem(problem)
     if coarse_problem is None:
         return None, ""
-    solution = polonsky_keer(coarse_problem, control,
-                             tolerance=max(tolerance, coarse_tolerance),
-                             max_iterations=max_iterations, edge_correction=edge_correction,
-                             interaction_block=interaction_block,
-                             coarse_tolerance=coarse_tolerance)
+    solution = polonsky_keer(coarse_problem, control, settings.but(
+        tolerance=max(settings.tolerance, settings.coarse_tolerance), coarse_start=True,
+        search_precision="double", preconditioned=True))
     pressure = solution.pressure
     finite = problem.grid.comm.allreduce(bool(np.isfinite(pressure).all()), op=MPI.LAND)
     cgrid = coarse_problem.grid
@@ -759,9 +716,8 @@ def full_contact_state(problem, control, timer=None):
                                  wall_time=timer() if timer is not None else 0.0)
 
 
-def solve_mean_gap_by_indentation(problem, control, *, tolerance=1e-8, max_iterations=10000,
-                                  initial_pressure=None, monitor=None, max_solves=50,
-                                  edge_correction=EDGE_CORRECTION):
+def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *,
+                                  initial_pressure=None, monitor=None, max_solves=50):
     """Mean-gap control on a free boundary: the indentation whose solution has the mean gap.
 
     On a free boundary the displacement has a mean of its own, so a mean gap
@@ -779,6 +735,7 @@ def solve_mean_gap_by_indentation(problem, control, *, tolerance=1e-8, max_itera
     Returns the last solve's solution with ``control`` set to the mean gap and
     iterations, operator applications and history summed over the solves.
     """
+    tolerance, max_iterations = settings.tolerance, settings.max_iterations
     g_bar = float(control.mean_gap)
     if not g_bar >= 0:
         raise ValueError(f"mean gap {g_bar} < 0 is impossible with a hard wall (gap >= 0)")
@@ -794,11 +751,9 @@ def solve_mean_gap_by_indentation(problem, control, *, tolerance=1e-8, max_itera
     iterations, history, pressure, solves = 0, [], initial_pressure, 0
     converged, reason = False, "max_solves"
     while solves < max_solves:
-        solution = polonsky_keer(problem, Indentation(depth), tolerance=tolerance,
-                                 max_iterations=max(max_iterations - iterations, 1),
-                                 initial_pressure=pressure, monitor=monitor,
-                                 coarse_start=pressure is None,
-                                 edge_correction=edge_correction)
+        solution = polonsky_keer(problem, Indentation(depth), settings.but(
+            max_iterations=max(max_iterations - iterations, 1), coarse_start=pressure is None),
+            initial_pressure=pressure, monitor=monitor)
         solves += 1
         iterations += solution.iterations
         history.extend(solution.history)

@@ -32,6 +32,7 @@ from petgap.solvers.edge_correction import EDGE_CORRECTION
 from petgap.solvers.gap_cg import gap_cg
 from petgap.solvers.patch_interaction import BLOCK
 from petgap.solvers.pressure_cg import polonsky_keer
+from petgap.solvers.settings import SolverSettings
 
 #: The solver types run by petgap's own solvers inside a TAO ``python`` type.
 PETGAP_TYPES = ("pcg", "pcg-pressure", "pcg-gap")
@@ -68,12 +69,14 @@ class _PetgapTao:
         maxit = tao.getMaximumIterations()
         if self.kind == "pcg-pressure":
             self.solution = polonsky_keer(
-                self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
+                self.problem, self.control, SolverSettings(
+                    tolerance=self.tolerance, max_iterations=maxit, **pressure_solver_options()),
                 initial_pressure=None if self.initial is None else self.initial.pressure,
-                monitor=report, **pressure_solver_options())
+                monitor=report)
         else:
             self.solution = gap_cg(
-                self.problem, self.control, tolerance=self.tolerance, max_iterations=maxit,
+                self.problem, self.control,
+                SolverSettings(tolerance=self.tolerance, max_iterations=maxit),
                 initial_gap=None if self.initial is None else self.initial.gap, monitor=report)
         tao.setIterationNumber(self.solution.iterations)
         tao.setConvergedReason(PETSc.TAO.Reason.CONVERGED_USER if self.solution.converged
@@ -431,10 +434,11 @@ def solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial,
         with petsc_options(options):
             settings = pressure_solver_options()
         seed = polonsky_keer(hard, Load(max(target, 1e-3 * problem.pressure_scale)),
-                             tolerance=max(tolerance, 1e-6), max_iterations=max_iterations,
-                             edge_correction=settings["edge_correction"],
-                             interaction_block=settings["interaction_block"],
-                             coarse_tolerance=settings["coarse_tolerance"])
+                             SolverSettings(tolerance=max(tolerance, 1e-6),
+                                            max_iterations=max_iterations,
+                                            edge_correction=settings["edge_correction"],
+                                            interaction_block=settings["interaction_block"],
+                                            coarse_tolerance=settings["coarse_tolerance"]))
         iterations += seed.iterations
         gap_guess, state = seed.mean_gap, seed
     points, history = [], []

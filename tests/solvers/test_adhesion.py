@@ -38,6 +38,7 @@ from petgap.parallel.grid import Grid
 from petgap.mechanics.interactions import (ExponentialAdhesion, HardWall, ResolutionError,
                                 ResolutionWarning, check_resolution, resolution_report)
 from petgap.solvers.dispatch import solve
+from petgap.solvers.settings import SolverSettings
 from petgap.solvers.sweeps import sweep
 from petgap.surfaces.self_affine import self_affine
 
@@ -773,9 +774,9 @@ def test_curvature_from_half_the_directions_transform(comm, monkeypatch, control
                             seed=4)
     ctrl = (Load(0.01 * problem.pressure_scale) if control == "load"
             else MeanGap(0.5 * problem.gap_scale))
-    halves = gap_cg(problem, ctrl, tolerance=1e-9)
+    halves = gap_cg(problem, ctrl, SolverSettings(tolerance=1e-9))
     monkeypatch.setattr(problem.half_space, "splits_transforms", False)
-    whole = gap_cg(problem, ctrl, tolerance=1e-9)
+    whole = gap_cg(problem, ctrl, SolverSettings(tolerance=1e-9))
     assert halves.converged and whole.converged
     assert halves.iterations == whole.iterations
     # residuals in h0' E*: the last (1e-9 and below) differ by round-off

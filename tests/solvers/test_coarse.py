@@ -17,6 +17,7 @@ from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.parallel.grid import Grid
 from petgap.solvers.pressure_cg import coarse_start_pressure, polonsky_keer
+from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
 from test_contact import (E_STAR, assert_same_state, max_abs, solve_on_three_ranks,
                           tolerance_scales)
@@ -103,7 +104,7 @@ def test_the_coarse_start_lies_in_the_fine_grids_fft_buffer(comm):
     first transform) in the grid's precision, instead of a slab of its own."""
     grid = make_grid((128, 128), comm)
     problem = _rough(grid)
-    pressure, description = coarse_start_pressure(problem, Load(0.05), 1e-8, 1000)
+    pressure, description = coarse_start_pressure(problem, Load(0.05), SolverSettings(tolerance=1e-8, max_iterations=1000))
     assert description.startswith("coarse 64x64")
     assert pressure.shape == grid.local_shape and pressure.dtype == grid.dtype
     assert np.shares_memory(pressure, grid.padded)
@@ -133,8 +134,8 @@ def test_coarse_start_reaches_the_uniform_start_state_sooner(comm, control):
     ctrl = Load(0.02 * problem.pressure_scale) if control == "load" \
         else MeanGap(0.8 * problem.rms_height)
     tol = 1e-9
-    coarse = polonsky_keer(problem, ctrl, tolerance=tol)
-    plain = polonsky_keer(problem, ctrl, tolerance=tol, coarse_start=False)
+    coarse = polonsky_keer(problem, ctrl, SolverSettings(tolerance=tol))
+    plain = polonsky_keer(problem, ctrl, SolverSettings(tolerance=tol, coarse_start=False))
     assert coarse.converged and plain.converged
     assert coarse.start.startswith("coarse 128x128:") and "64x64" in coarse.start \
         and "32x32" in coarse.start
@@ -176,8 +177,8 @@ def test_coarse_start_on_two_ranks_equals_one(comm, control, whole_points, monke
     many_problem = ContactProblem(grid, grid.local_part(h).copy(), ElasticHalfSpace(grid, E_STAR))
     ctrl = Load(0.02 * one_problem.pressure_scale) if control == "load" \
         else MeanGap(0.8 * one_problem.rms_height)
-    one = polonsky_keer(one_problem, ctrl, tolerance=1e-10)
-    many = polonsky_keer(many_problem, ctrl, tolerance=1e-10)
+    one = polonsky_keer(one_problem, ctrl, SolverSettings(tolerance=1e-10))
+    many = polonsky_keer(many_problem, ctrl, SolverSettings(tolerance=1e-10))
     assert one.converged and many.converged and one.start.startswith("coarse 65x32")
     assert many.iterations == one.iterations and many.start == one.start
     h0, ps = one_problem.gap_scale, one_problem.pressure_scale
@@ -196,7 +197,7 @@ def test_coarse_start_on_three_ranks_equals_one(comm, mpi_tmp_path, run_cli):
     problem = ContactProblem(serial, h, ElasticHalfSpace(serial, E_STAR))
     controls = [Load(0.02 * problem.pressure_scale), MeanGap(0.8 * problem.rms_height)]
     for (gap, pressure, scalars), control in zip(three, controls):
-        one = polonsky_keer(problem, control, tolerance=1e-10)
+        one = polonsky_keer(problem, control, SolverSettings(tolerance=1e-10))
         assert scalars["ranks"] == 3 and scalars["converged"] and one.converged
         assert one.start.startswith("coarse 67x32")
         assert scalars["iterations"] == one.iterations and scalars["start"] == one.start
@@ -222,7 +223,7 @@ def test_coarse_planning_time_is_said_per_level(comm):
         grid = make_grid((256, 256), comm)
         problem = _rough(grid)
         for load in (0.01, 0.02):
-            polonsky_keer(problem, Load(load * problem.pressure_scale), tolerance=1e-8)
+            polonsky_keer(problem, Load(load * problem.pressure_scale), SolverSettings(tolerance=1e-8))
     finally:
         logger.removeHandler(handler)
         logger.setLevel(level)
@@ -242,10 +243,10 @@ def test_the_coarse_tolerance_reaches_the_solvers(comm):
     from petgap.solvers.mixed_precision import solve_mixed
     problem = _rough(make_grid((256, 256), comm))
     control = Load(0.02 * problem.pressure_scale)
-    default = polonsky_keer(problem, control, tolerance=1e-8)
+    default = polonsky_keer(problem, control, SolverSettings(tolerance=1e-8))
     loose = solve(problem, control, solver="pcg-pressure", tolerance=1e-8,
                   options={"petgap_coarse_tolerance": "0.05"})
-    direct = polonsky_keer(problem, control, tolerance=1e-8, coarse_tolerance=0.05)
+    direct = polonsky_keer(problem, control, SolverSettings(tolerance=1e-8, coarse_tolerance=0.05))
     assert default.converged and loose.converged
     assert loose.start == direct.start != default.start
     assert list(loose.history) == list(direct.history)
@@ -255,9 +256,8 @@ def test_the_coarse_tolerance_reaches_the_solvers(comm):
     assert coarse_iterations(loose) < coarse_iterations(default)
     mixed = solve(problem, control, tolerance=1e-8, precision="mixed",
                   options={"petgap_coarse_tolerance": "0.05"})
-    assert mixed.start == solve_mixed(problem, control, tolerance=1e-8,
-                                      coarse_tolerance=0.05).start
-    assert mixed.start != solve_mixed(problem, control, tolerance=1e-8).start
+    assert mixed.start == solve_mixed(problem, control, SolverSettings(tolerance=1e-8, coarse_tolerance=0.05, search_precision="single")).start
+    assert mixed.start != solve_mixed(problem, control, SolverSettings(tolerance=1e-8, search_precision="single")).start
 
 
 @pytest.mark.parametrize("value", [0, -1e-3, float("inf"), float("nan"), "1e-3"])
@@ -265,4 +265,4 @@ def test_a_coarse_tolerance_that_is_not_positive_is_refused(comm, value):
     problem = _rough(make_grid((64, 64), comm))
     with pytest.raises(ValueError, match=r"coarse_tolerance = .* is not allowed: the tolerance "
                                          r"of the coarse start's solves is a positive number"):
-        polonsky_keer(problem, Load(0.02 * problem.pressure_scale), coarse_tolerance=value)
+        polonsky_keer(problem, Load(0.02 * problem.pressure_scale), SolverSettings(coarse_tolerance=value))

@@ -33,6 +33,7 @@ from petgap.solvers import pressure_cg as pk
 from petgap.mechanics.interactions import ExponentialAdhesion, HardWall
 from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.solvers.dispatch import solve
+from petgap.solvers.settings import SolverSettings
 from petgap.solvers.sweeps import sweep
 from petgap.solvers.tao import DimensionlessGap, GapHessian
 from petgap.surfaces.self_affine import self_affine
@@ -605,17 +606,18 @@ THREE_RANK_SCRIPT = textwrap.dedent("""
     from petgap.parallel.grid import Grid
     from petgap.solvers.pressure_cg import polonsky_keer
     from petgap.solvers.dispatch import solve
+    from petgap.solvers.settings import SolverSettings
 
     out, name = Path(sys.argv[1]), sys.argv[2]
     size, modulus = tuple(json.loads(sys.argv[3])), float(sys.argv[4])
-    solver = {"solve": solve, "polonsky_keer": polonsky_keer}[name]
     comm = MPI.COMM_WORLD
     h = np.load(out / "h.npy")
     grid = Grid(h.shape, size=size, comm=comm, planner="estimate")
     problem = ContactProblem(grid, grid.local_part(h).copy(), ElasticHalfSpace(grid, modulus))
     controls = [Load(0.02 * problem.pressure_scale), MeanGap(0.8 * problem.rms_height)]
     for k, control in enumerate(controls):
-        sol = solver(problem, control, tolerance=1e-10)
+        sol = (solve(problem, control, tolerance=1e-10) if name == "solve"
+               else polonsky_keer(problem, control, SolverSettings(tolerance=1e-10)))
         gap, pressure = grid.gather(sol.gap), grid.gather(sol.pressure)
         if comm.rank == 0:
             np.save(out / f"gap{k}.npy", gap)
@@ -771,9 +773,9 @@ def test_step_length_from_half_the_directions_image(comm, monkeypatch, control):
     problem = rough_problem(grid, seed=4)
     ctrl = (Load(0.01 * problem.pressure_scale) if control == "load"
             else MeanGap(0.5 * problem.gap_scale))
-    halves = polonsky_keer(problem, ctrl, tolerance=1e-10)
+    halves = polonsky_keer(problem, ctrl, SolverSettings(tolerance=1e-10))
     monkeypatch.setattr(problem.half_space, "splits_transforms", False)
-    whole = polonsky_keer(problem, ctrl, tolerance=1e-10)
+    whole = polonsky_keer(problem, ctrl, SolverSettings(tolerance=1e-10))
     assert halves.converged and whole.converged
     assert halves.iterations == whole.iterations
     # residuals in h0: the last (1e-10 and below) differ by the gap's round-off, 1e-16 h0
@@ -800,11 +802,9 @@ def test_uniform_cold_start_in_closed_form_is_the_general_first_iteration(comm, 
     control = Load(0.02 * problem.pressure_scale)
     # without the preconditioner's edge term: zero on the set of every point, its
     # transform would be spent at iteration 0 by the general form only
-    closed = polonsky_keer(problem, control, tolerance=1e-10, coarse_start=False,
-                           edge_correction=0.0)
+    closed = polonsky_keer(problem, control, SolverSettings(tolerance=1e-10, coarse_start=False, edge_correction=0.0))
     monkeypatch.setattr(pk, "_uniform_first_iteration", lambda *a, **k: None)
-    general = polonsky_keer(problem, control, tolerance=1e-10, coarse_start=False,
-                            edge_correction=0.0)
+    general = polonsky_keer(problem, control, SolverSettings(tolerance=1e-10, coarse_start=False, edge_correction=0.0))
     assert closed.converged and general.converged
     assert closed.iterations == general.iterations
     assert closed.operator_applications == general.operator_applications - 1.5
@@ -820,7 +820,7 @@ def test_no_iteration_allowed_reports_the_uniform_start(comm):
     grid = make_grid((32, 24), comm)
     problem = rough_problem(grid)
     load = 0.02 * problem.pressure_scale
-    sol = polonsky_keer(problem, Load(load), tolerance=1e-10, max_iterations=0)
+    sol = polonsky_keer(problem, Load(load), SolverSettings(tolerance=1e-10, max_iterations=0))
     assert not sol.converged and sol.reason == "max_iterations" and sol.iterations == 0
     assert max_abs(grid, sol.pressure - load) <= 1e-12 * load
     assert len(sol.history) == 1 and sol.operator_applications == 1

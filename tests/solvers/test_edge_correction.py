@@ -22,6 +22,7 @@ from petgap.solvers.dispatch import solve
 from petgap.solvers.edge_correction import WINDOW, EdgeCorrection, kernel_window
 from petgap.solvers.mixed_precision import solve_mixed
 from petgap.solvers.pressure_cg import polonsky_keer
+from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
 from test_contact import E_STAR, assert_same_state, max_abs, tolerance_scales
 
@@ -177,8 +178,8 @@ def test_the_corrected_preconditioner_reaches_the_same_state_sooner(comm, contro
     problem = benchmark_problem(comm)
     control = (Load(0.002 * 0.1 * E_STAR) if control == "load"
                else MeanGap(0.5 * problem.rms_height))
-    plain = polonsky_keer(problem, control, tolerance=1e-9, edge_correction=0.0)
-    assert_same_state_sooner(problem, plain, polonsky_keer(problem, control, tolerance=1e-9), 1e-9)
+    plain = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, edge_correction=0.0))
+    assert_same_state_sooner(problem, plain, polonsky_keer(problem, control, SolverSettings(tolerance=1e-9)), 1e-9)
 
 
 def assert_same_state_sooner(problem, without, with_term, tol):
@@ -199,7 +200,7 @@ def test_the_option_reaches_the_solver(comm):
     default = solve(problem, control, solver="pcg-pressure", tolerance=1e-8)
     plain = solve(problem, control, solver="pcg-pressure", tolerance=1e-8,
                   options={"petgap_edge_correction": "0"})
-    direct = polonsky_keer(problem, control, tolerance=1e-8, edge_correction=0.0)
+    direct = polonsky_keer(problem, control, SolverSettings(tolerance=1e-8, edge_correction=0.0))
     assert plain.iterations == direct.iterations != default.iterations
 
 
@@ -210,7 +211,7 @@ def test_the_option_reaches_the_mixed_solve(comm):
     default = solve(problem, control, tolerance=1e-8, precision="mixed")
     plain = solve(problem, control, tolerance=1e-8, precision="mixed",
                   options={"petgap_edge_correction": "0"})
-    direct = solve_mixed(problem, control, tolerance=1e-8, edge_correction=0.0)
+    direct = solve_mixed(problem, control, SolverSettings(tolerance=1e-8, edge_correction=0.0, search_precision="single"))
     assert plain.iterations == direct.iterations != default.iterations
     assert plain.start == direct.start
 
@@ -219,14 +220,14 @@ def test_the_option_reaches_the_mixed_solve(comm):
 def test_a_share_outside_zero_to_one_is_refused(comm, theta):
     problem = benchmark_problem(comm, n=64)
     with pytest.raises(ValueError, match=r"edge_correction = .* is not allowed.*\[0, 1\)"):
-        polonsky_keer(problem, Load(0.001), edge_correction=theta)
+        polonsky_keer(problem, Load(0.001), SolverSettings(edge_correction=theta))
 
 
 def test_a_correction_that_is_not_positive_is_dropped(comm, monkeypatch):
     """Made to look negative on the gap, the correction is never applied: the plain solve."""
     problem = benchmark_problem(comm, n=128)
     control = Load(0.002 * 0.1 * E_STAR)
-    plain = polonsky_keer(problem, control, tolerance=1e-9, edge_correction=0.0)
+    plain = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, edge_correction=0.0))
     original = EdgeCorrection.sums
 
     def overdone(self, gS, idx):
@@ -235,9 +236,8 @@ def test_a_correction_that_is_not_positive_is_dropped(comm, monkeypatch):
 
     monkeypatch.setattr(EdgeCorrection, "sums", overdone)
     with solver_notices() as records:
-        dropped = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False)
-        plain = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False,
-                              edge_correction=0.0)
+        dropped = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, coarse_start=False))
+        plain = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, coarse_start=False, edge_correction=0.0))
     assert dropped.converged
     assert sum("going on without it" in r.getMessage() for r in records) == 1
     # dropped at its first preconditioned iteration: the plain solve, step for step

@@ -24,6 +24,7 @@ from petgap.solvers.mixed_precision import solve_mixed
 from petgap.solvers.patch_interaction import (MAX_SIDE, MIN_SIDE, PatchInteraction, blocks,
                                               patch_interaction)
 from petgap.solvers.pressure_cg import polonsky_keer
+from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
 from test_contact import E_STAR, assert_same_state, max_abs, tolerance_scales
 from test_edge_correction import assert_same_state_sooner, solver_notices
@@ -132,8 +133,8 @@ def test_the_interaction_reaches_the_same_state_sooner(comm):
     """Fewer iterations on a grid of 1024^2 (32 blocks a side), the same state."""
     problem = benchmark_problem(comm)
     control = Load(0.002 * 0.1 * E_STAR)
-    local = polonsky_keer(problem, control, tolerance=1e-9, interaction_block=0)
-    assert_same_state_sooner(problem, local, polonsky_keer(problem, control, tolerance=1e-9),
+    local = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, interaction_block=0))
+    assert_same_state_sooner(problem, local, polonsky_keer(problem, control, SolverSettings(tolerance=1e-9)),
                              1e-9)
 
 
@@ -141,8 +142,8 @@ def test_no_interaction_under_mean_gap_control(comm):
     """Where it took more iterations than it saved: the solve without it, step for step."""
     problem = benchmark_problem(comm)
     control = MeanGap(0.5 * problem.rms_height)
-    default = polonsky_keer(problem, control, tolerance=1e-9)
-    local = polonsky_keer(problem, control, tolerance=1e-9, interaction_block=0)
+    default = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9))
+    local = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, interaction_block=0))
     assert default.converged
     assert list(default.history) == list(local.history)
 
@@ -151,8 +152,8 @@ def test_the_interaction_does_not_depend_on_the_ranks(comm):
     """Decompositions only reorder sums: agreement to 1e-12 of the natural scales."""
     serial, problem = benchmark_problem(MPI.COMM_SELF), benchmark_problem(comm)
     control = Load(0.002 * 0.1 * E_STAR)
-    one = polonsky_keer(serial, control, tolerance=1e-10)
-    many = polonsky_keer(problem, control, tolerance=1e-10)
+    one = polonsky_keer(serial, control, SolverSettings(tolerance=1e-10))
+    many = polonsky_keer(problem, control, SolverSettings(tolerance=1e-10))
     assert one.converged and many.converged
     assert many.iterations == one.iterations
     grid = problem.grid
@@ -167,11 +168,11 @@ def test_the_option_reaches_the_solvers(comm):
     default = solve(problem, control, solver="pcg-pressure", tolerance=1e-8)
     off = solve(problem, control, solver="pcg-pressure", tolerance=1e-8,
                 options={"petgap_interaction_block": "0"})
-    direct = polonsky_keer(problem, control, tolerance=1e-8, interaction_block=0)
+    direct = polonsky_keer(problem, control, SolverSettings(tolerance=1e-8, interaction_block=0))
     assert list(off.history) == list(direct.history) != list(default.history)
     mixed = solve(problem, control, tolerance=1e-8, precision="mixed",
                   options={"petgap_interaction_block": "0"})
-    mixed_direct = solve_mixed(problem, control, tolerance=1e-8, interaction_block=0)
+    mixed_direct = solve_mixed(problem, control, SolverSettings(tolerance=1e-8, interaction_block=0, search_precision="single"))
     assert mixed.start == mixed_direct.start
     assert list(mixed.history) == list(mixed_direct.history)
 
@@ -180,16 +181,15 @@ def test_the_option_reaches_the_solvers(comm):
 def test_a_block_that_is_not_a_whole_number_is_refused(comm, block):
     problem = benchmark_problem(comm, n=64)
     with pytest.raises(ValueError, match=rf"interaction_block = {block} is not allowed"):
-        polonsky_keer(problem, Load(0.001), interaction_block=block)
+        polonsky_keer(problem, Load(0.001), SolverSettings(interaction_block=block))
 
 
 def assert_dropped_once(problem, control, notice):
     """Solved cold with the term made to fail: converged, ``notice`` logged once, and the
     state of the solve without the term."""
     with solver_notices() as records:
-        dropped = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False)
-    local = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False,
-                          interaction_block=0)
+        dropped = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, coarse_start=False))
+    local = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, coarse_start=False, interaction_block=0))
     assert dropped.converged
     assert sum(notice in r.getMessage() for r in records) == 1
     assert_same_state(problem.grid, local, dropped, *tolerance_scales(problem, 1e-9))
@@ -217,10 +217,8 @@ def test_a_step_after_which_the_residual_rose_withdraws_the_interaction(comm, mo
     problem = benchmark_problem(comm)
     control = Load(0.002 * 0.1 * E_STAR)
     with solver_notices() as records:
-        withdrawn = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False,
-                                  interaction_block=block)
-    local = polonsky_keer(problem, control, tolerance=1e-9, coarse_start=False,
-                          interaction_block=0)
+        withdrawn = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, coarse_start=False, interaction_block=block))
+    local = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, coarse_start=False, interaction_block=0))
     notices = [r.getMessage() for r in records if "withdrawn until" in r.getMessage()]
     assert withdrawn.converged and len(notices) >= 2
     admitted = [float(m.split("changes at most ")[1].split()[0]) for m in notices]

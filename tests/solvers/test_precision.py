@@ -19,6 +19,7 @@ from petgap.parallel.grid import Grid
 from petgap.solvers.dispatch import solve
 from petgap.solvers.mixed_precision import single_precision_twin
 from petgap.solvers.pressure_cg import STALL_FACTOR, STALL_ITERATIONS, polonsky_keer
+from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
 
 SHAPE = (256, 256)
@@ -95,14 +96,14 @@ def test_a_single_solve_below_its_round_off_stops_as_stalled(comm):
     iteration limit; the double solve of the same tolerance converges.
     """
     single = rough(comm, "single")
-    sol = polonsky_keer(single, Load(0.004), tolerance=1e-10, max_iterations=2000)
+    sol = polonsky_keer(single, Load(0.004), SolverSettings(tolerance=1e-10, max_iterations=2000))
     assert not sol.converged and sol.reason == "stalled_round_off"
     assert STALL_ITERATIONS < sol.iterations < 200
     assert 1e-10 < sol.kkt_gap < 1e-5        # near its floor, not lost
     assert len(sol.history) > STALL_ITERATIONS
     best = min(sol.history)
     assert min(sol.history[-STALL_ITERATIONS:]) >= STALL_FACTOR * best
-    double = polonsky_keer(rough(comm), Load(0.004), tolerance=1e-10, max_iterations=2000)
+    double = polonsky_keer(rough(comm), Load(0.004), SolverSettings(tolerance=1e-10, max_iterations=2000))
     assert double.converged and double.kkt_gap <= 1e-10
 
 

@@ -16,6 +16,7 @@ from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers.dispatch import solve
 from petgap.solvers.pressure_cg import SEARCH_PRECISION, polonsky_keer
+from petgap.solvers.settings import SolverSettings
 from petgap.solvers.tao import check_petsc_options
 from petgap.surfaces.self_affine import self_affine
 
@@ -38,9 +39,9 @@ def contact_difference(comm, a, b):
 def test_a_single_search_reaches_the_double_answer(comm, control):
     problem = rough(comm)
     ctrl = (Load(0.004) if control == "load" else MeanGap(0.6 * problem.rms_height))
-    ref = polonsky_keer(problem, ctrl, tolerance=1e-9, search_precision="double")
+    ref = polonsky_keer(problem, ctrl, SolverSettings(tolerance=1e-9, search_precision="double"))
     before = problem.operator_applications
-    sol = polonsky_keer(problem, ctrl, tolerance=1e-9, search_precision="single")
+    sol = polonsky_keer(problem, ctrl, SolverSettings(tolerance=1e-9, search_precision="single"))
     assert SEARCH_PRECISION == "double"
     assert ref.converged and sol.converged and sol.kkt_gap <= 1e-9
     assert sol.pressure.dtype == np.float64 and sol.gap.dtype == np.float64
@@ -60,8 +61,8 @@ def test_a_single_search_depends_on_the_ranks_within_the_tolerance(comm):
     one, many = rough(MPI.COMM_SELF, shape=(130, 64)), rough(comm, shape=(130, 64))
     grid, ps = many.grid, many.pressure_scale
     for search, bound in (("double", 1e-12), ("single", 1e-8)):
-        a = polonsky_keer(one, Load(0.004), tolerance=1e-9, search_precision=search)
-        b = polonsky_keer(many, Load(0.004), tolerance=1e-9, search_precision=search)
+        a = polonsky_keer(one, Load(0.004), SolverSettings(tolerance=1e-9, search_precision=search))
+        b = polonsky_keer(many, Load(0.004), SolverSettings(tolerance=1e-9, search_precision=search))
         assert a.converged and b.converged
         assert largest(comm, b.pressure - a.pressure[grid.x_slice]) <= bound * ps
         assert a.contact_fraction == b.contact_fraction
@@ -69,8 +70,8 @@ def test_a_single_search_depends_on_the_ranks_within_the_tolerance(comm):
 
 def test_the_option_reaches_the_solver_and_is_checked(comm):
     problem = rough(comm, shape=(96, 80))
-    direct = polonsky_keer(problem, Load(0.004), tolerance=1e-8, search_precision="single")
-    double = polonsky_keer(problem, Load(0.004), tolerance=1e-8)
+    direct = polonsky_keer(problem, Load(0.004), SolverSettings(tolerance=1e-8, search_precision="single"))
+    double = polonsky_keer(problem, Load(0.004), SolverSettings(tolerance=1e-8))
     run = solve(problem, Load(0.004), tolerance=1e-8, solver="pcg",
                 options={"petgap_search_precision": "single"})
     assert run.converged and run.iterations == direct.iterations
@@ -81,7 +82,7 @@ def test_the_option_reaches_the_solver_and_is_checked(comm):
                        "single or double")] and not unknown
     with pytest.raises(ValueError, match="search_precision = 'half' is not allowed: need "
                                          "'single' or 'double'"):
-        polonsky_keer(problem, Load(0.004), search_precision="half")
+        polonsky_keer(problem, Load(0.004), SolverSettings(search_precision="half"))
 
 
 def test_a_single_search_on_a_free_boundary(comm):
@@ -95,8 +96,8 @@ def test_a_single_search_on_a_free_boundary(comm):
     problem = ContactProblem(grid, indenter(grid, "paraboloid", 400.0), FreeHalfSpace(grid, 1.0))
     assert not problem.half_space.transforms_in_single
     control = Indentation(24.0 ** 2 / 400.0)
-    ref = polonsky_keer(problem, control, tolerance=1e-9)
-    sol = polonsky_keer(problem, control, tolerance=1e-9, search_precision="single")
+    ref = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9))
+    sol = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, search_precision="single"))
     assert ref.converged and sol.converged and contact_difference(comm, sol, ref) == 0
     assert largest(comm, sol.pressure - ref.pressure) <= 1e-8 * largest(comm, ref.pressure)
     assert sol.mean_pressure == pytest.approx(ref.mean_pressure, rel=1e-9)

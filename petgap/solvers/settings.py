@@ -1,0 +1,95 @@
+"""The settings of a solve: one frozen value, checked once where it is made.
+
+A scene's ``[solver]`` section, the PETSc options of a run (``-petgap_*``) and the
+keywords of :func:`petgap.solve` all become one :class:`SolverSettings` at the
+edge of the program; the solvers receive it and never read an options database.
+Each field is checked here, once, with the key and what is allowed named in the
+error, so that no solver re-validates what it was given.
+"""
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from petgap.solvers.coarse import COARSE_TOLERANCE
+from petgap.solvers.edge_correction import EDGE_CORRECTION
+from petgap.solvers.patch_interaction import BLOCK
+
+#: The floating-point precisions a field or a transform may run in.
+FLOAT_PRECISIONS = ("single", "double")
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """How to solve, independent of what is solved.
+
+    Attributes
+    ----------
+    tolerance : float
+        Unit-free KKT tolerance (largest pressure violation over ``h0' E*``, gap
+        violation over ``h0``), in (0, 1).
+    max_iterations : int
+        Iteration limit of the whole solve, outer loops included.
+    coarse_start : bool
+        A cold pressure solve starts from the solution on a coarser grid where the
+        grid's shape allows (:mod:`petgap.solvers.coarse`).
+    coarse_tolerance : float
+        The tolerance of the coarse start's solves (or ``tolerance`` if looser).
+    edge_correction : float
+        The share, in [0, 1), of the contact-edge term taken off the pressure
+        solver's preconditioner (:mod:`petgap.solvers.edge_correction`).
+    interaction_block : int
+        Side in pixels of the blocks of the preconditioner's patch interaction
+        (:mod:`petgap.solvers.patch_interaction`); 0 leaves it out.
+    search_precision : {"double", "single"}
+        Precision of the pressure solver's two step-finding transforms on a double
+        grid (:mod:`petgap.solvers.pressure_cg`, "Precision").
+    preconditioned : bool
+        Precondition the pressure solver with the restricted stiffness.
+    """
+
+    tolerance: float = 1e-8
+    max_iterations: int = 10000
+    coarse_start: bool = True
+    coarse_tolerance: float = COARSE_TOLERANCE
+    edge_correction: float = EDGE_CORRECTION
+    interaction_block: int = BLOCK
+    search_precision: str = "double"
+    preconditioned: bool = True
+
+    def __post_init__(self):
+        problems = [problem for problem in (
+            _number_in(self.tolerance, "tolerance", 0, 1, "the tolerance is a number in (0, 1), e.g. 1e-8"),
+            None if _whole(self.max_iterations) and self.max_iterations >= 0 else
+            ("max_iterations", self.max_iterations, "the iteration limit is a whole number >= 0"),
+            _number_in(self.coarse_tolerance, "coarse_tolerance", 0, np.inf,
+                       "the tolerance of the coarse start's solves is a positive number"),
+            None if _real(self.edge_correction) and 0 <= self.edge_correction < 1 else
+            ("edge_correction", self.edge_correction,
+             "the share of the contact-edge term taken off the preconditioner is in [0, 1)"),
+            None if _whole(self.interaction_block) and self.interaction_block >= 0 else
+            ("interaction_block", self.interaction_block,
+             "the side of the patch interaction's blocks is a whole number of pixels >= 1, "
+             "or 0 to leave the interaction out"),
+            None if self.search_precision in FLOAT_PRECISIONS else
+            ("search_precision", self.search_precision, "need 'single' or 'double'"),
+        ) if problem is not None]
+        if problems:
+            key, value, allowed = problems[0]
+            raise ValueError(f"{key} = {value!r} is not allowed: {allowed}")
+
+    def but(self, **changes):
+        """A copy with ``changes`` (checked like any other)."""
+        return replace(self, **changes)
+
+
+def _real(value):
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+
+
+def _whole(value):
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+def _number_in(value, key, low, high, allowed):
+    """None when ``low < value < high``, else ``(key, value, allowed)``."""
+    return None if _real(value) and low < value < high else (key, value, allowed)
