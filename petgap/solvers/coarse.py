@@ -13,7 +13,7 @@ coarse, and the levels below cost a third of the first in all.  Its pressure, re
 block, starts the fine solve with the set already at the contact fraction of
 the answer, which takes a third or more of the iterations off a cold solve
 (docs/benchmarks.md has the current figures).  The coarse problem is solved
-the same way (:func:`petgap.solvers.pressure_cg.coarse_start_pressure` drives it), so
+the same way (:func:`petgap.solvers.pressure_start.coarse_start_pressure` drives it), so
 large grids descend through several levels (1024^2: 512^2, 256^2, ..., 32^2).
 The coarse problem is made for the start and dropped after it (the later
 steps of a sweep start warm), so that it never adds to the fine solve's peak

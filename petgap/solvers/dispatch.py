@@ -43,7 +43,7 @@ solvers, adhesion and the free boundary refuse them, saying so.
 On a free boundary (:class:`petgap.mechanics.free_half_space.FreeHalfSpace`) the hard
 wall runs ``pcg-pressure`` on the map: under load, under
 :class:`~petgap.mechanics.problem.Indentation`, and under a mean gap through the
-indentation (:func:`petgap.solvers.pressure_cg.solve_mean_gap_by_indentation`).
+indentation (:func:`petgap.solvers.indentation.solve_mean_gap_by_indentation`).
 Adhesion, and the solvers on the gap, run on the map's padded periodic cell
 (:mod:`petgap.solvers.free_boundary`), under load or mean gap.
 
@@ -59,8 +59,8 @@ from petgap.mechanics.problem import Indentation, Load, MeanGap
 from petgap.solvers.free_boundary import solve_on_cell
 from petgap.solvers.mixed_precision import solve_mixed
 from petgap.solvers.settings import SolverSettings
-from petgap.solvers.pressure_cg import (full_contact_state, solve_mean_gap_by_indentation,
-                                        touching_state)
+from petgap.solvers.contact_limits import full_contact_state, touching_state
+from petgap.solvers.indentation import solve_mean_gap_by_indentation
 from petgap.solvers.tao import (PETGAP_TYPES, petsc_options, pressure_solver_options,
                                 solve_load_by_mean_gap, solve_mean_gap_by_multiplier,
                                 tao_solve)

@@ -16,7 +16,8 @@ from petgap.solvers.coarse import (coarse_problem, coarsening_factor, is_whole, 
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.parallel.grid import Grid
-from petgap.solvers.pressure_cg import coarse_start_pressure, polonsky_keer
+from petgap.solvers.pressure_cg import polonsky_keer
+from petgap.solvers.pressure_start import coarse_start_pressure
 from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
 from test_contact import (E_STAR, assert_same_state, max_abs, solve_on_three_ranks,
@@ -104,7 +105,8 @@ def test_the_coarse_start_lies_in_the_fine_grids_fft_buffer(comm):
     first transform) in the grid's precision, instead of a slab of its own."""
     grid = make_grid((128, 128), comm)
     problem = _rough(grid)
-    pressure, description = coarse_start_pressure(problem, Load(0.05), SolverSettings(tolerance=1e-8, max_iterations=1000))
+    pressure, description = coarse_start_pressure(
+        problem, Load(0.05), SolverSettings(tolerance=1e-8, max_iterations=1000), polonsky_keer)
     assert description.startswith("coarse 64x64")
     assert pressure.shape == grid.local_shape and pressure.dtype == grid.dtype
     assert np.shares_memory(pressure, grid.padded)

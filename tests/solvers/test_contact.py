@@ -29,7 +29,7 @@ from petgap import reference_solutions as ref
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.parallel.grid import Grid
-from petgap.solvers import pressure_cg as pk
+from petgap.solvers import pressure_start
 from petgap.mechanics.interactions import ExponentialAdhesion, HardWall
 from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.solvers.dispatch import solve
@@ -793,7 +793,7 @@ def test_uniform_cold_start_in_closed_form_is_the_general_first_iteration(comm, 
     From a uniform pressure the general iteration's two and a half transform
     pairs (``u``, ``z`` and the forward half of the direction's image, the set
     changing) reduce to one (``u = 0``, ``r = g``, ``tau = 1``; see
-    :func:`petgap.solvers.pressure_cg._uniform_first_iteration`).  Solved both ways,
+    :func:`petgap.solvers.pressure_start.uniform_first_iteration`).  Solved both ways,
     the residual histories agree to round-off, so do the iteration counts and
     the states, and the closed form saves exactly one and a half applications.
     """
@@ -803,7 +803,7 @@ def test_uniform_cold_start_in_closed_form_is_the_general_first_iteration(comm, 
     # without the preconditioner's edge term: zero on the set of every point, its
     # transform would be spent at iteration 0 by the general form only
     closed = polonsky_keer(problem, control, SolverSettings(tolerance=1e-10, coarse_start=False, edge_correction=0.0))
-    monkeypatch.setattr(pk, "_uniform_first_iteration", lambda *a, **k: None)
+    monkeypatch.setattr(pressure_start, "uniform_first_iteration", lambda *a, **k: None)
     general = polonsky_keer(problem, control, SolverSettings(tolerance=1e-10, coarse_start=False, edge_correction=0.0))
     assert closed.converged and general.converged
     assert closed.iterations == general.iterations

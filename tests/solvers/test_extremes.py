@@ -460,7 +460,7 @@ def test_three_ranks_on_two_cores_uneven_slabs(comm, mpi_tmp_path, run_cli):
 
 def test_full_contact_load_is_westergaards(comm):
     """P_full of a sinusoid h0 cos(2 pi x / L) is Westergaard's p* = pi E* h0 / L."""
-    from petgap.solvers.pressure_cg import full_contact_load  # deferred: one test needs it
+    from petgap.solvers.contact_limits import full_contact_load  # deferred: one test needs it
     grid = make_grid((64, 16), comm, size=(3.0, 0.75))
     x, _ = grid.local_positions()
     h = 0.02 * np.cos(2 * np.pi * x / 3.0)

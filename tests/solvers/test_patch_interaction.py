@@ -18,7 +18,7 @@ from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers import _contact_set as _cs
 from petgap.solvers import patch_interaction as patch_interaction_module
-from petgap.solvers import pressure_cg
+from petgap.solvers import preconditioners
 from petgap.solvers.dispatch import solve
 from petgap.solvers.mixed_precision import solve_mixed
 from petgap.solvers.patch_interaction import (MAX_SIDE, MIN_SIDE, PatchInteraction, blocks,
@@ -212,7 +212,7 @@ def test_a_step_after_which_the_residual_rose_withdraws_the_interaction(comm, mo
     than the fraction that let it in before (at first ``SETTLED_FRACTION``, a quarter of it
     for blocks of 64 pixels), and the solve still reaches the state it reaches without the
     term."""
-    monkeypatch.setattr(pressure_cg, "RISE_FACTOR", 0.0)   # every residual "rose"
+    monkeypatch.setattr(preconditioners, "RISE_FACTOR", 0.0)   # every residual "rose"
     monkeypatch.setattr(patch_interaction_module, "MIN_SIDE", 16)   # 64-pixel blocks at 1024^2
     problem = benchmark_problem(comm)
     control = Load(0.002 * 0.1 * E_STAR)
@@ -222,8 +222,8 @@ def test_a_step_after_which_the_residual_rose_withdraws_the_interaction(comm, mo
     notices = [r.getMessage() for r in records if "withdrawn until" in r.getMessage()]
     assert withdrawn.converged and len(notices) >= 2
     admitted = [float(m.split("changes at most ")[1].split()[0]) for m in notices]
-    first = pressure_cg.SETTLED_FRACTION * min(1.0, (32 / block) ** 2)
-    expected = [first * pressure_cg.WITHDRAWN_FACTOR ** (k + 1) for k in range(len(notices))]
+    first = preconditioners.SETTLED_FRACTION * min(1.0, (32 / block) ** 2)
+    expected = [first * preconditioners.WITHDRAWN_FACTOR ** (k + 1) for k in range(len(notices))]
     np.testing.assert_allclose(admitted, expected, rtol=1e-2)
     assert_same_state(problem.grid, local, withdrawn, *tolerance_scales(problem, 1e-9))
 
@@ -232,13 +232,13 @@ def test_larger_blocks_wait_for_a_more_settled_set(monkeypatch):
     """The admitted fraction scales with 32-pixel blocks' area over the blocks' own, grown
     blocks (beyond MAX_SIDE a side) included, and is never more than SETTLED_FRACTION."""
     grid = Grid((256, 192), comm=MPI.COMM_SELF, planner="estimate", wisdom=False)
-    settled = pressure_cg.SETTLED_FRACTION
-    assert pressure_cg.settled_fraction(None) == settled
+    settled = preconditioners.SETTLED_FRACTION
+    assert preconditioners.settled_fraction(None) == settled
     for block, area in [(16, 256), (32, 1024), (64, 4096)]:
         far = PatchInteraction(grid, E_STAR, 0.6, block)
         assert far.block_area == area
-        assert pressure_cg.settled_fraction(far) == pytest.approx(settled * min(1, 1024 / area))
+        assert preconditioners.settled_fraction(far.block_area) == pytest.approx(settled * min(1, 1024 / area))
     monkeypatch.setattr(patch_interaction_module, "MAX_SIDE", 4)   # 32-pixel blocks grow
     far = PatchInteraction(grid, E_STAR, 0.6, 32)
     assert (far.mx, far.my, far.block_area) == (4, 4, 64 * 48)
-    assert pressure_cg.settled_fraction(far) == pytest.approx(settled * 1024 / (64 * 48))
+    assert preconditioners.settled_fraction(far.block_area) == pytest.approx(settled * 1024 / (64 * 48))

@@ -15,7 +15,7 @@ from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers.dispatch import solve
-from petgap.solvers.pressure_cg import SEARCH_PRECISION, polonsky_keer
+from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.solvers.settings import SolverSettings
 from petgap.solvers.tao import check_petsc_options
 from petgap.surfaces.self_affine import self_affine
@@ -42,7 +42,7 @@ def test_a_single_search_reaches_the_double_answer(comm, control):
     ref = polonsky_keer(problem, ctrl, SolverSettings(tolerance=1e-9, search_precision="double"))
     before = problem.operator_applications
     sol = polonsky_keer(problem, ctrl, SolverSettings(tolerance=1e-9, search_precision="single"))
-    assert SEARCH_PRECISION == "double"
+    assert SolverSettings().search_precision == "double"
     assert ref.converged and sol.converged and sol.kkt_gap <= 1e-9
     assert sol.pressure.dtype == np.float64 and sol.gap.dtype == np.float64
     assert sol.operator_applications == problem.operator_applications - before > 0
