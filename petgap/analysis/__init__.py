@@ -32,9 +32,9 @@ Conventions
   ``A_rep = dx dy * (number of contact pixels)``, ``c = A_rep / A0``.  The default
   tolerance is ``GAP_ROUND_OFF = 1e-6`` times the mean gap (:func:`resolve_gap_tolerance`):
   a solver that computes the gap as ``d + u - h`` leaves round-off gaps of order its
-  tolerance (``~1e-9`` of ``h0``) on contact pixels -- on a 512^2 rough contact solved
-  to 1e-8 by Polonsky-Keer, 37 % of the contact pixels -- while physical gaps next to a
-  contact edge are many orders larger (``g ~ g0 (s / d_rep)^(3/2)``).
+  tolerance (``~1e-9`` of ``h0``) on contact pixels -- on a rough contact, a large share
+  of them -- while physical gaps next to a contact edge are many orders larger
+  (``g ~ g0 (s / d_rep)^(3/2)``).
 * Perimeter ``P_rep``: length of the marching-squares contour of the contact set
   with crossings placed by the universal square-root / three-halves asymptotics
   of a smooth contact edge (:func:`perimeter`).  ``d_rep = pi A_rep / P_rep``

@@ -333,8 +333,8 @@ class Grid:
         field that is read before the next transform overwrites it (a prolonged
         start the solver reads once into its contact set).  Why borrow rather
         than allocate: the buffer's pages are mapped anyway, and a fresh slab's
-        first touch is not free (on a virtual machine, where the host maps each
-        new page, seconds per GB).
+        first touch is not free (on a virtual machine the host maps each new page,
+        far dearer than a write to a page already mapped).
         """
         padded = self.padded if padded is None else padded
         return padded.reshape(-1)[:self.local_shape[0] * self.ny].reshape(self.local_shape)
