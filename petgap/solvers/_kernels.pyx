@@ -223,3 +223,98 @@ def copy_from(double[:, ::1] y, const double[:, ::1] x):
         for i in range(m):
             for j in range(n):
                 y[i, j] = x[i, j]
+
+
+# ---------------------------------------------------------------------------
+# The coarse term of the gap preconditioner (petgap.solvers.gap_two_level).  Coarse
+# node ``(I, J)`` sits on fine point ``(I b, J b)``; a fine point gives its bilinear
+# hat weights to the four nodes around it (periodically).  ``x0`` is the global index
+# of this rank's first row; the coarse arrays are whole on every rank.
+
+cdef inline void _hat_add(double[:, ::1] out, Py_ssize_t gi, Py_ssize_t j, Py_ssize_t b,
+                          double v) noexcept nogil:
+    cdef Py_ssize_t ncx = out.shape[0], ncy = out.shape[1]
+    cdef Py_ssize_t I = gi // b, J = j // b
+    cdef Py_ssize_t I1 = I + 1 if I + 1 < ncx else 0
+    cdef Py_ssize_t J1 = J + 1 if J + 1 < ncy else 0
+    cdef double fx = <double>(gi - I * b) / b, fy = <double>(j - J * b) / b
+    out[I, J] += (1.0 - fx) * (1.0 - fy) * v
+    out[I, J1] += (1.0 - fx) * fy * v
+    out[I1, J] += fx * (1.0 - fy) * v
+    out[I1, J1] += fx * fy * v
+
+
+def coarse_restrict(const double[:, ::1] real, Py_ssize_t ny, Py_ssize_t x0, Py_ssize_t b,
+                    double[:, ::1] out):
+    """``out[I, J] += sum_x hat_IJ(x) real(x)`` over this rank's rows (first ``ny`` columns)."""
+    cdef Py_ssize_t i, j, m = real.shape[0]
+    cdef double v
+    with nogil:
+        for i in range(m):
+            for j in range(ny):
+                v = real[i, j]
+                if v != 0.0:
+                    _hat_add(out, x0 + i, j, b, v)
+
+
+def coarse_springs(const double[:, ::1] g, const double[:, ::1] vp, bint adh, double rho,
+                   double edge, Py_ssize_t x0, Py_ssize_t b, double[:, ::1] out):
+    """Restrict the springs: ``edge`` per free neighbour along y at a point at the wall,
+    ``v''(g) = -v'(g) / rho`` elsewhere (negative; zero for the hard wall)."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef int free
+    cdef double v
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                if g[i, j] <= 0.0:
+                    free = (g[i, j - 1 if j > 0 else n - 1] > 0.0) + \
+                        (g[i, j + 1 if j + 1 < n else 0] > 0.0)
+                    if free == 0:
+                        continue
+                    v = edge * free
+                elif adh:
+                    v = -vp[i, j] / rho
+                else:
+                    continue
+                _hat_add(out, x0 + i, j, b, v)
+
+
+def coarse_subtract(double[:, ::1] real, Py_ssize_t ny, const double[:, ::1] y,
+                    Py_ssize_t x0, Py_ssize_t b):
+    """``real -= P y`` on the first ``ny`` columns, ``P`` the bilinear prolongation."""
+    cdef Py_ssize_t i, j, m = real.shape[0], ncx = y.shape[0], ncy = y.shape[1]
+    cdef Py_ssize_t gi, I, I1, J, J1
+    cdef double fx, fy
+    with nogil:
+        for i in range(m):
+            gi = x0 + i
+            I = gi // b
+            I1 = I + 1 if I + 1 < ncx else 0
+            fx = <double>(gi - I * b) / b
+            for j in range(ny):
+                J = j // b
+                J1 = J + 1 if J + 1 < ncy else 0
+                fy = <double>(j - J * b) / b
+                real[i, j] -= ((1.0 - fx) * ((1.0 - fy) * y[I, J] + fy * y[I, J1])
+                               + fx * ((1.0 - fy) * y[I1, J] + fy * y[I1, J1]))
+
+
+def gcg_cross_sums(const double[:, ::1] real, double[:, ::1] r_old, const double[:, ::1] pel,
+                   const double[:, ::1] g, const double[:, ::1] vp, bint adh, double lam_f,
+                   double lam):
+    """Returns ``(sum_F z r_old, sum_F r_old)`` (``z = real``), then ``r_old = grad + lam``
+    on F and 0 elsewhere: the Polak-Ribiere term of :func:`petgap.solvers.gap_cg.gap_cg`."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double gr, szr = 0.0, sr = 0.0
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
+                if g[i, j] > 0.0 or gr + lam_f < 0.0:
+                    szr += real[i, j] * r_old[i, j]
+                    sr += r_old[i, j]
+                    r_old[i, j] = gr + lam
+                else:
+                    r_old[i, j] = 0.0
+    return szr, sr

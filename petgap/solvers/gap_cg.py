@@ -89,6 +89,7 @@ from petgap.parallel.collective import global_sums
 from petgap.parallel.log import GAP_CG_EVENT, event
 from petgap.solvers import _kernels as _k
 from petgap.solvers.convergence import Timer, judge
+from petgap.solvers.gap_two_level import CoarseTerm, block_for
 from petgap.solvers.settings import SolverSettings
 
 
@@ -131,8 +132,16 @@ def _project_mean(grid, g, target, h, padded, comm):
     _pass(_k.project_and_load, g, mu, h, padded)
 
 
+#: With the coarse term, conjugacy is kept across a projection that put at most this
+#: fraction of the free set at the wall (module docstring of
+#: :mod:`petgap.solvers.gap_two_level`); without it, every projection restarts.
+KEEP_FRACTION = 1.0
+#: With the coarse term, ``beta`` is Polak-Ribiere+ rather than the ratio of ``r.z``.
+POLAK_RIBIERE = True
+
+
 def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, monitor=None,
-           refresh_interval=50):
+           refresh_interval=50, two_level=False):
     """Solve hard-wall or adhesive contact on the gap, under load or mean-gap control.
 
     Parameters
@@ -148,6 +157,9 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         ``monitor(iteration, residual)`` on every rank.
     refresh_interval : int
         Recompute ``p_el`` from scratch at least this often.
+    two_level : bool
+        Add the coarse term to the preconditioner (:mod:`petgap.solvers.gap_two_level`)
+        and keep conjugacy across projections.
 
     Returns
     -------
@@ -207,9 +219,14 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
     fresh_pressure()
     fresh, since_fresh = True, 0
     beta_ok, rz_old = False, 1.0
+    block = block_for(grid.shape) if two_level else 0
+    coarse = CoarseTerm(grid, half_space.contact_modulus, block) if block else None
+    keep = KEEP_FRACTION if two_level else 0.0
+    r_old = np.zeros(grid.local_shape) if two_level and POLAK_RIBIERE else None
     split = half_space.splits_transforms
     history = []
     negative_curvature = 0
+    counts = dict(capped=0, projected=0, released=0, refreshed=0)
     converged, reason, it = False, "max_iterations", 0
     lam_f = lam if load else 0.0
     for it in range(max_iterations + 1):
@@ -227,6 +244,7 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
             pull = 0.5 * history[-1] * problem.pressure_scale
             strong = _pass(_k.gcg_free_sums, pel, g, vp, adh, lam_f + pull)[1]
             beta_ok = comm.allreduce(strong, op=MPI.SUM) == n_open
+            counts["released"] += not beta_ok
         ext = np.array([gmax, -gmin])
         comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
         if not load:
@@ -257,7 +275,12 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
 
         # preconditioned residual z = P_F K^{-1} P_F r (one pair)
         _pass(_k.gcg_write_residual, pel, g, vp, adh, lam_f, lam, padded)
+        if coarse is not None:
+            coarse.set_springs(g, vp, adh, rho)
+            coarse.restrict(padded)
         half_space.apply_in_buffer(inverse=True)
+        if coarse is not None:
+            coarse.correct(padded)
         sum_z, rz, sum_r = global_sums(
             comm, *_pass(_k.gcg_precond_sums, padded, pel, g, vp, adh, lam_f, lam))
         if load:
@@ -266,7 +289,13 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
             rz += mean_mode * sum_r * sum_r / n
         else:
             zshift = sum_z / n_free
-        beta = rz / rz_old if beta_ok else 0.0
+        if r_old is not None:
+            # Polak-Ribiere+: the preconditioner changes with the springs and the free set
+            cross, sum_old = global_sums(comm, *_pass(_k.gcg_cross_sums, padded, r_old, pel, g,
+                                                      vp, adh, lam_f, lam))
+            beta = max(0.0, (rz - cross + zshift * sum_old) / rz_old) if beta_ok else 0.0
+        else:
+            beta = rz / rz_old if beta_ok else 0.0
         rz_old = rz
         _pass(_k.gcg_direction, padded, pel, g, vp, adh, t, lam_f, zshift, beta)
 
@@ -287,10 +316,12 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         if not slope < 0:
             # not a descent direction (round-off or non-convexity): restart
             beta_ok = False
-            if not fresh:
-                np.add(g, h, out=padded[:, :grid.ny])
-                fresh_pressure()
-                fresh, since_fresh = True, 0
+            if not fresh or (two_level and beta != 0.0):
+                # a kept conjugacy can leave a fresh state on an ascent direction
+                if not fresh:
+                    np.add(g, h, out=padded[:, :grid.ny])
+                    fresh_pressure()
+                    fresh, since_fresh = True, 0
                 continue
             reason = "no_descent_direction"
             break
@@ -303,6 +334,9 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
             negative_curvature += 1
             tau = rho / tmax if tmax > 0 else 0.0
         negative = comm.allreduce(_pass(_k.gcg_step, g, t, tau), op=MPI.SUM)
+        counts["capped"] += capped
+        counts["projected"] += negative > 0
+        counts["refreshed"] += since_fresh >= refresh_interval
         if negative > 0 or curv <= 0 or capped or since_fresh >= refresh_interval:
             # the projection acts: new free set, fresh elastic pressure, restart
             if load:
@@ -312,7 +346,7 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
                 _project_mean(grid, g, target, h, padded, comm)
             fresh_pressure()
             fresh, since_fresh = True, 0
-            beta_ok = negative == 0 and curv > 0 and not capped
+            beta_ok = negative <= keep * n_free and curv > 0 and not capped
         else:
             if split:
                 half_space.finish()
@@ -329,6 +363,9 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         iterations=it, operator_applications=problem.operator_applications - start_ops,
         wall_time=timer(), history=history)
     solution.negative_curvature_steps = negative_curvature
+    solution.step_counts = dict(counts, negative_curvature=negative_curvature)
+    if coarse is not None:
+        solution.step_counts["coarse_iterations"] = coarse.inner_iterations
     return solution
 
 
