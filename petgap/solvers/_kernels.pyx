@@ -300,13 +300,14 @@ def coarse_subtract(double[:, ::1] real, Py_ssize_t ny, const double[:, ::1] y,
                                + fx * ((1.0 - fy) * y[I1, J] + fy * y[I1, J1]))
 
 
-def gcg_cross_sums(const double[:, ::1] real, double[:, ::1] r_old, const double[:, ::1] pel,
-                   const double[:, ::1] g, const double[:, ::1] vp, bint adh, double lam_f,
-                   double lam):
-    """Returns ``(sum_F z r_old, sum_F r_old)`` (``z = real``), then ``r_old = grad + lam``
-    on F and 0 elsewhere: the Polak-Ribiere term of :func:`petgap.solvers.gap_cg.gap_cg`."""
+def gcg_cross_sums(const double[:, ::1] real, double[:, ::1] r_old, const double[:, ::1] t,
+                   const double[:, ::1] pel, const double[:, ::1] g, const double[:, ::1] vp,
+                   bint adh, double lam_f, double lam):
+    """Returns ``(sum_F z r_old, sum_F r_old, sum_F t)`` (``z = real``), then ``r_old =
+    grad + lam`` on F and 0 elsewhere: the Polak-Ribiere term of
+    :func:`petgap.solvers.gap_cg.gap_cg` and the mean of the old direction over F."""
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double gr, szr = 0.0, sr = 0.0
+    cdef double gr, szr = 0.0, sr = 0.0, st = 0.0
     with nogil:
         for i in range(m):
             for j in range(n):
@@ -314,7 +315,8 @@ def gcg_cross_sums(const double[:, ::1] real, double[:, ::1] r_old, const double
                 if g[i, j] > 0.0 or gr + lam_f < 0.0:
                     szr += real[i, j] * r_old[i, j]
                     sr += r_old[i, j]
+                    st += t[i, j]
                     r_old[i, j] = gr + lam
                 else:
                     r_old[i, j] = 0.0
-    return szr, sr
+    return szr, sr, st

@@ -138,6 +138,9 @@ def _project_mean(grid, g, target, h, padded, comm):
 KEEP_FRACTION = 1.0
 #: With the coarse term, ``beta`` is Polak-Ribiere+ rather than the ratio of ``r.z``.
 POLAK_RIBIERE = True
+_TRACE = False
+_RELEASE = True
+_CAP = True
 
 
 def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, monitor=None,
@@ -222,7 +225,7 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
     block = block_for(grid.shape) if two_level else 0
     coarse = CoarseTerm(grid, half_space.contact_modulus, block) if block else None
     keep = KEEP_FRACTION if two_level else 0.0
-    r_old = np.zeros(grid.local_shape) if two_level and POLAK_RIBIERE else None
+    r_old = np.zeros(grid.local_shape) if two_level else None
     split = half_space.splits_transforms
     history = []
     negative_curvature = 0
@@ -237,7 +240,7 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
             lam_f = -s_open / n_open if n_open > 0 else 0.0
         s_free, n_free, gmax, gmin = _pass(_k.gcg_free_sums, pel, g, vp, adh, lam_f)
         s_free, n_free = global_sums(comm, s_free, n_free)
-        if beta_ok and not load and n_free > n_open:
+        if beta_ok and not load and n_free > n_open and _RELEASE:
             # points at the wall joined F: restart if one is pulled off it by half the
             # last residual or more (module docstring).  One more pass, in the few
             # iterations that would go on with points at the wall in F.
@@ -290,10 +293,16 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         else:
             zshift = sum_z / n_free
         if r_old is not None:
-            # Polak-Ribiere+: the preconditioner changes with the springs and the free set
-            cross, sum_old = global_sums(comm, *_pass(_k.gcg_cross_sums, padded, r_old, pel, g,
-                                                      vp, adh, lam_f, lam))
-            beta = max(0.0, (rz - cross + zshift * sum_old) / rz_old) if beta_ok else 0.0
+            # the preconditioner changes with the springs and the free set: Polak-Ribiere+;
+            # points that left F take their share of the old direction's mean with them
+            cross, sum_old, sum_t = global_sums(comm, *_pass(
+                _k.gcg_cross_sums, padded, r_old, t, pel, g, vp, adh, lam_f, lam))
+            if POLAK_RIBIERE:
+                beta = max(0.0, (rz - cross + zshift * sum_old) / rz_old) if beta_ok else 0.0
+            else:
+                beta = rz / rz_old if beta_ok else 0.0
+            if not load:
+                zshift -= beta * sum_t / n_free
         else:
             beta = rz / rz_old if beta_ok else 0.0
         rz_old = rz
@@ -328,12 +337,16 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         capped = False
         if curv > 0:
             tau = -slope / curv
-            if w > 0 and tau * tmax > rho:  # beyond the quadratic model's reach
+            if _CAP and w > 0 and tau * tmax > rho:  # beyond the quadratic model's reach
                 tau, capped = rho / tmax, True
         else:
             negative_curvature += 1
             tau = rho / tmax if tmax > 0 else 0.0
         negative = comm.allreduce(_pass(_k.gcg_step, g, t, tau), op=MPI.SUM)
+        if _TRACE:
+            print(f"it {it} r={history[-1]:.2e} nfree={n_free} neg={negative} tau={tau:.3g} "
+                  f"tmax={tmax:.3g} beta={beta:.3g} curv={curv:.3g} capped={capped} "
+                  f"clip={coarse.clipped if coarse else 0}", flush=True)
         counts["capped"] += capped
         counts["projected"] += negative > 0
         counts["refreshed"] += since_fresh >= refresh_interval
@@ -365,7 +378,8 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
     solution.negative_curvature_steps = negative_curvature
     solution.step_counts = dict(counts, negative_curvature=negative_curvature)
     if coarse is not None:
-        solution.step_counts["coarse_iterations"] = coarse.inner_iterations
+        solution.step_counts.update(coarse_iterations=coarse.inner_iterations,
+                                    coarse_clipped=coarse.clipped)
     return solution
 
 

@@ -59,8 +59,9 @@ BLOCK = 16
 MAX_SIDE = 256
 #: With fewer nodes a side the cell is too small for the term to matter.
 MIN_SIDE = 4
-#: Relative residual of the coarse system's conjugate gradients.
+#: Relative residual of the coarse system's conjugate gradients, and their limit.
 INNER_TOLERANCE = 1e-6
+MAX_INNER = 500
 #: Spring per pair of neighbouring pixels across a contact edge, in ``E* / a0``:
 #: the mean of ``K 1_C`` summed over the contact points per such pair.
 EDGE_SPRING = 0.66
@@ -92,7 +93,8 @@ def coarse_compliance(shape, size, block, contact_modulus):
     """``rfft2`` symbol of ``Fc = R K^{-1} P`` on the coarse grid (zero mean mode)."""
     (nx, ny), (lx, ly), b = shape, size, block
     ncx, ncy = nx // b, ny // b
-    orders = np.arange(-ALIASES, ALIASES + 1)
+    # each of the b aliases of a coarse wavenumber once (all of them for small b)
+    orders = np.arange(-min(ALIASES, b // 2), min(ALIASES + 1, b - b // 2))
     kx = np.arange(ncx)[:, None] + ncx * orders[None, :]
     ky = np.arange(ncy // 2 + 1)[:, None] + ncy * orders[None, :]
     hx, hy = _hat_spectrum(kx, nx, b), _hat_spectrum(ky, ny, b)
@@ -126,22 +128,20 @@ class CoarseTerm:
         self.coarse_shape = (grid.shape[0] // block, grid.shape[1] // block)
         self.symbol = coarse_compliance(grid.shape, (grid.Lx, grid.Ly), block, contact_modulus)
         self.edge = EDGE_SPRING * contact_modulus / np.sqrt(grid.dx * grid.dy)
-        self.root = np.zeros(self.coarse_shape)   # W^{1/2}
+        self.root_symbol = np.sqrt(self.symbol)   # H = Fc^{1/2}
+        self.springs = np.zeros(self.coarse_shape)
         self.rhs = np.zeros(self.coarse_shape)
-        self.inner_iterations = 0
+        self.inner_iterations = self.clipped = 0
 
     def _summed(self, local):
         self.grid.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
         return local / float(self.block) ** 2
 
-    def _compliance(self, y):
-        return np.fft.irfft2(np.fft.rfft2(y) * self.symbol, s=self.coarse_shape)
-
     def set_springs(self, g, vp, adhesive, rho):
         """``W`` from the contact edges and ``v''(g)`` of the current gap (one pass)."""
         local = np.zeros(self.coarse_shape)
         _k.coarse_springs(g, vp, adhesive, rho, self.edge, self.x0, self.block, local)
-        np.sqrt(np.maximum(self._summed(local), 0.0), out=self.root)
+        self.springs = self._summed(local)
 
     def restrict(self, padded):
         """Keep ``R r`` of the residual in the FFT buffer (before ``K^{-1}`` is applied)."""
@@ -149,18 +149,22 @@ class CoarseTerm:
         _k.coarse_restrict(padded, self.grid.ny, self.x0, self.block, local)
         self.rhs = self._summed(local)
 
-    def correct(self, padded):
-        """Subtract ``P Fc y`` from ``K^{-1} r`` in the FFT buffer."""
-        s = self.root
-        b = s * self._compliance(self.rhs)
+    def _filter(self, y, symbol):
+        return np.fft.irfft2(np.fft.rfft2(y) * symbol, s=self.coarse_shape)
+
+    def _solve(self, springs, b):
+        """``(I + H W H)^{-1} b`` by conjugate gradients, or None where it is not positive."""
         x = np.zeros_like(b)
         res, norm = b.copy(), float(np.sqrt(np.sum(b * b)))
         if norm == 0.0:
-            return
+            return x
         d, rr = res.copy(), norm * norm
-        for _ in range(500):
-            ad = d + s * self._compliance(s * d)
-            alpha = rr / float(np.sum(d * ad))
+        for _ in range(MAX_INNER):
+            ad = d + self._filter(springs * self._filter(d, self.root_symbol), self.root_symbol)
+            curvature = float(np.sum(d * ad))
+            if not curvature > 0:
+                return None
+            alpha = rr / curvature
             x += alpha * d
             res -= alpha * ad
             rr_new = float(np.sum(res * res))
@@ -169,5 +173,15 @@ class CoarseTerm:
                 break
             d = res + (rr_new / rr) * d
             rr = rr_new
-        y = self._compliance(s * x)
+        return x
+
+    def correct(self, padded):
+        """Subtract ``P (Fc R r - H v)`` from ``K^{-1} r`` in the FFT buffer."""
+        hr = self._filter(self.rhs, self.root_symbol)
+        v = self._solve(self.springs, hr)
+        if v is None:
+            # the softening outweighs the springs on some long wave: leave it out
+            self.clipped += 1
+            v = self._solve(np.maximum(self.springs, 0.0), hr)
+        y = self._filter(self.rhs, self.symbol) - self._filter(v, self.root_symbol)
         _k.coarse_subtract(padded, self.grid.ny, np.ascontiguousarray(y), self.x0, self.block)
