@@ -120,13 +120,19 @@ class CoarseTerm:
         ``E*`` of the half-space.
     block : int
         Pixels between coarse nodes (:func:`block_for`).
+    mean_compliance : float
+        Under load control, the compliance the preconditioner gives the mean mode
+        (``c`` of :mod:`petgap.solvers.gap_cg`); the coarse grid's mean mode then
+        carries it too, and the springs stiffen it as the contact does.  Zero under
+        mean-gap control, whose directions have no mean.
     """
 
-    def __init__(self, grid, contact_modulus, block):
+    def __init__(self, grid, contact_modulus, block, mean_compliance=0.0):
         self.grid, self.block = grid, block
         self.x0 = grid.x_slice.start
         self.coarse_shape = (grid.shape[0] // block, grid.shape[1] // block)
         self.symbol = coarse_compliance(grid.shape, (grid.Lx, grid.Ly), block, contact_modulus)
+        self.symbol[0, 0] = mean_compliance
         self.edge = EDGE_SPRING * contact_modulus / np.sqrt(grid.dx * grid.dy)
         self.root_symbol = np.sqrt(self.symbol)   # H = Fc^{1/2}
         self.springs = np.zeros(self.coarse_shape)
