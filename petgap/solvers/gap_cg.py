@@ -138,9 +138,6 @@ def _project_mean(grid, g, target, h, padded, comm):
 KEEP_FRACTION = 1.0
 #: With the coarse term, ``beta`` is Polak-Ribiere+ rather than the ratio of ``r.z``.
 POLAK_RIBIERE = True
-_TRACE = False
-_RELEASE = True
-_CAP = True
 
 
 def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, monitor=None,
@@ -245,7 +242,7 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
             lam_f = -s_open / n_open if n_open > 0 else 0.0
         s_free, n_free, gmax, gmin = _pass(_k.gcg_free_sums, pel, g, vp, adh, lam_f)
         s_free, n_free = global_sums(comm, s_free, n_free)
-        if beta_ok and not load and n_free > n_open and _RELEASE:
+        if beta_ok and not load and n_free > n_open:
             # points at the wall joined F: restart if one is pulled off it by half the
             # last residual or more (module docstring).  One more pass, in the few
             # iterations that would go on with points at the wall in F.
@@ -342,16 +339,12 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         capped = False
         if curv > 0:
             tau = -slope / curv
-            if _CAP and w > 0 and tau * tmax > rho:  # beyond the quadratic model's reach
+            if w > 0 and tau * tmax > rho:  # beyond the quadratic model's reach
                 tau, capped = rho / tmax, True
         else:
             negative_curvature += 1
             tau = rho / tmax if tmax > 0 else 0.0
         negative = comm.allreduce(_pass(_k.gcg_step, g, t, tau), op=MPI.SUM)
-        if _TRACE:
-            print(f"it {it} r={history[-1]:.2e} nfree={n_free} neg={negative} tau={tau:.3g} "
-                  f"tmax={tmax:.3g} beta={beta:.3g} curv={curv:.3g} capped={capped} "
-                  f"clip={coarse.clipped if coarse else 0}", flush=True)
         counts["capped"] += capped
         counts["projected"] += negative > 0
         counts["refreshed"] += since_fresh >= refresh_interval
