@@ -79,6 +79,8 @@ def _cases():
     cases += [Case(f"load-{n}-{p}", n, load, precision=p)
               for p in ("single", "mixed") for n in (512, 1024)]
     cases += [Case(f"meangap-{n}", n, ("mean-gap", "mean_gap_1024")) for n in (512, 1024)]
+    cases += [Case(f"meangap-pressure-{n}", n, ("mean-gap", "mean_gap_1024"),
+                   solver="pcg-pressure") for n in (512, 1024)]
     cases += [Case(f"load-512-{label}", 512, load, options={key: value})
               for label, key, value in (("nocoarse", "petgap_coarse_start", "0"),
                                         ("noedge", "petgap_edge_correction", "0"),
