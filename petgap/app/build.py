@@ -27,6 +27,7 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.app import protocol
+from petgap.io import solver_registry as registry
 from petgap.io.scene import Scene, SceneError
 from petgap.mechanics.free_half_space import FreeHalfSpace
 from petgap.mechanics.half_space import ElasticHalfSpace
@@ -34,7 +35,6 @@ from petgap.mechanics.interactions import ExponentialAdhesion, check_resolution
 from petgap.mechanics.problem import ContactProblem
 from petgap.parallel.grid import Grid
 from petgap.parallel.log import get_logger, timed
-from petgap.solvers.dispatch import SOLVER_TYPES
 from petgap.solvers.sweeps import SweepStep, sweep
 from petgap.solvers.tao import check_petsc_options
 from petgap.surfaces.indenters import KINDS as INDENTERS, indenter
@@ -143,9 +143,11 @@ def check_options(scene, petsc_args=(), strict=False, log=None):
         errors += [f"PETSc option -{name} {value!r} ({where}): {problem}; allowed: {allowed}"
                    for name, value, problem, allowed in bad]
         tao_type = options.get("tao_type")
-        if tao_type is not None and tao_type not in SOLVER_TYPES + ("python",):
+        refusal = None if tao_type is None else registry.choice_refusal(
+            "tao_type", registry.ALIASES.get(tao_type, tao_type), registry.SOLVER_NAMES)
+        if refusal is not None:
             errors.append(f"PETSc option -tao_type {tao_type!r} ({where}): is not a solver "
-                          f"petgap runs; allowed: {', '.join(SOLVER_TYPES)}")
+                          f"petgap runs; allowed: {', '.join(registry.SOLVER_NAMES)}")
         unknown += [(f"-{name} ({where})", f" (did you mean -{close}?)" if close else "")
                     for name, close in strange]
     if unknown and strict:
@@ -239,8 +241,7 @@ def check_size(scene, comm, solve=True):
             f"rank{'s' if size > 1 else ''} is beyond the {MAX_SLAB_POINTS} points petgap's "
             f"kernels can index; allowed: at most {most_rows} rows of {ny} per rank: {fix}")
     per_point = BYTES_PER_POINT_SOLVE if solve else BYTES_PER_POINT_SURFACE
-    if solve and scene.interaction.kind == "hard-wall" and scene.solver.tao_type in \
-            ("pcg", "pcg-pressure") and scene.control.reference != "non-adhesive":
+    if solve and scene_case(scene).kind == "pcg-pressure":
         per_point = (BYTES_PER_POINT_PRESSURE_SINGLE if scene.solver.precision == "single"
                      else BYTES_PER_POINT_PRESSURE)
     if solve and not scene.surface.periodic:
@@ -273,6 +274,19 @@ def check_size(scene, comm, solve=True):
         f"({per_point} bytes per point of a {rows} x {ny} slab), more than a rank has: "
         f"{'; '.join(have)}; use more ranks (about {ranks}, on more nodes), a smaller grid, "
         f"or raise the limit")
+
+
+def scene_case(scene):
+    """What a scene's steps combine, in the registry's words (:mod:`petgap.io.solver_registry`).
+
+    A scene of the paper's protocol (``control.reference``) has adhesive steps.
+    """
+    control = scene.control
+    return registry.Case(solver=scene.solver.tao_type,
+                         control=None if control.kind == "none" else control.kind,
+                         adhesive=scene.interaction.kind != "hard-wall",
+                         periodic=scene.surface.periodic, precision=scene.solver.precision,
+                         tolerance=scene.solver.tolerance)
 
 
 def _is_number(text):
@@ -395,7 +409,7 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
     check_options(scene, petsc_args, strict=strict, log=log)
     steps = protocol.plan(scene)
     check_size(scene, comm, solve=bool(steps))
-    if steps and scene.solver.precision == "single":
+    if steps and registry.grid_precision(scene.solver.precision) == "single":
         # The surface is made in double and rounded: the same surface as a double
         # run's (its random numbers are drawn in double), so that the two compare.
         with _timed(log, "making the surface (in double, then rounded to single)"):

@@ -18,7 +18,7 @@ most accurate rung of each, what every rung costs and how wrong it is:
     says so.
 *precision ladder*
     The scene at its own grid and tolerance in ``solver.precision`` = single
-    (at its tolerance floor, :data:`petgap.io.scene.SINGLE_TOLERANCE_FLOOR`, if
+    (at its tolerance floor, :data:`petgap.io.solver_registry.SINGLE_TOLERANCE_FLOOR`, if
     the scene's is tighter), mixed and double (the reference).  Single and mixed
     solve non-adhesive contact on a periodic cell with the pressure solver; for
     other scenes their rungs are skipped, saying why.
@@ -63,9 +63,10 @@ from mpi4py import MPI
 
 from petgap import analysis
 from petgap.app.argtypes import number_in, positive_float
-from petgap.app.build import build, load_scene, make_grid, make_surface
+from petgap.app.build import build, load_scene, make_grid, make_surface, scene_case
 from petgap.app.study_report import StudyError, check_outputs, format_table, write_outputs
-from petgap.io.scene import SINGLE_TOLERANCE_FLOOR, precision_refusal
+from petgap.io import solver_registry as registry
+from petgap.io.solver_registry import SINGLE_TOLERANCE_FLOOR
 from petgap.parallel.collective import root_decides
 from petgap.parallel.grid import DecompositionError
 from petgap.parallel.log import get_logger
@@ -194,9 +195,13 @@ def precision_ladder(scene):
     solvers other than the pressure solver).
     """
     g, solver = scene.grid, scene.solver
-    # (the paper's protocol has an adhesive interaction: refused with it)
-    refusal = precision_refusal(scene.interaction.kind, solver.tao_type, scene.surface.periodic)
-    why = None if refusal is None else f"solver.precision single or mixed {refusal[0]}"
+    # what the registry says of the scene in mixed precision (single needs the same), the
+    # tolerance left out: single runs at its floor (the paper's protocol has an adhesive
+    # interaction: refused with it)
+    case = dataclasses.replace(scene_case(scene), precision="mixed", tolerance=None)
+    refused = [r for r in registry.refusals(case) if r.key == "precision"]
+    why = f"solver.precision single or mixed {refused[0].detail(registry.api_name)}" \
+        if refused else None
     rungs = []
     for i, precision in enumerate(PRECISIONS):
         tolerance = solver.tolerance

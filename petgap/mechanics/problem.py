@@ -159,6 +159,17 @@ class ContactSolution:
         return out
 
 
+@dataclass(frozen=True)
+class Scales:
+    """What makes a problem's KKT residuals unit-free: the rms height ``h0`` and slope ``h0'``.
+
+    The gap residual is over ``h0``, the pressure residual over ``h0' E*``.
+    """
+
+    rms_height: float
+    rms_slope: float
+
+
 class ContactProblem:
     """Everything a solver needs to know about one contact configuration.
 
@@ -174,10 +185,15 @@ class ContactProblem:
     contact_modulus : float, optional
         ``E*`` of the half-space made when none is given (default 1); when one
         is given, its modulus must agree.
+    scales : Scales, optional
+        The KKT scales ``h0`` and ``h0'`` (:attr:`scales`) of the problem this one
+        stands in for, instead of its own topography's: a free map's problem solved on
+        its padded cell (:mod:`petgap.solvers.free_boundary`) judges its residuals as
+        the map's, whose surface the cell's far-away outside would distort.
     """
 
     def __init__(self, grid, topography, half_space=None, interaction=None, *,
-                 contact_modulus=None):
+                 contact_modulus=None, scales=None):
         # checked on every rank together: a slab of the wrong shape raises everywhere
         # kept in its own floating type until made the grid's (no double copy of a
         # single-precision topography)
@@ -200,12 +216,15 @@ class ContactProblem:
         #: The highest point, ``max(h)``: where an indentation is counted from.
         self.top_height = grid.comm.allreduce(float(np.max(self.topography, initial=-np.inf)),
                                               op=MPI.MAX)
-        self.rms_height = stats.rms_height
-        #: ``h0'``: spectral on a periodic cell; on a free boundary by finite differences
-        #: inside the map, since the spectrum of a map whose edges do not match holds the
-        #: seam's cliff (which no free solve sees).
-        self.rms_slope = stats.rms_slope if half_space.periodic else \
-            finite_difference_slopes(grid, self.topography)[1]
+        if scales is not None:
+            self.rms_height, self.rms_slope = scales.rms_height, scales.rms_slope
+        else:
+            self.rms_height = stats.rms_height
+            #: ``h0'``: spectral on a periodic cell; on a free boundary by finite
+            #: differences inside the map, since the spectrum of a map whose edges do not
+            #: match holds the seam's cliff (which no free solve sees).
+            self.rms_slope = stats.rms_slope if half_space.periodic else \
+                finite_difference_slopes(grid, self.topography)[1]
         if not (self.rms_height > 0 and self.rms_slope > 0):
             raise ValueError("the topography is flat: contact of a flat surface has no "
                              "rough-contact solution (rms height and slope are zero)")
@@ -214,6 +233,11 @@ class ContactProblem:
         #: Gap scale of the KKT residual, ``h0``.
         self.gap_scale = self.rms_height
         self._derived = {}
+
+    @property
+    def scales(self):
+        """The KKT scales: ``h0`` (:attr:`gap_scale`) and ``h0'`` (``pressure_scale / E*``)."""
+        return Scales(self.rms_height, self.rms_slope)
 
     @property
     def operator_applications(self):
