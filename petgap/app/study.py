@@ -437,22 +437,7 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
     c, g0 = stats.contact_fraction, stats.g0
     row.update(c=c, d_rep=stats.mean_diameter, g0=g0, mean_gap=geometry.mean_gap,
                mean_pressure=geometry.mean_pressure)
-    fit = {"exponent": math.nan, "prefactor": math.nan, "fit_points": 0,
-           "power_law_x_min": math.nan, "power_law_decades": math.nan}
-    if 0 < c < 1 and math.isfinite(g0) and g0 > 0:
-        lo, hi = fit_range
-        nbins = max(1, int(round(bins_per_decade * math.log10(hi / lo))))
-        edges = g0 * np.geomspace(lo, hi, nbins + 1)
-        common = analysis.gap_distribution(grid, gap, pressure, bins=edges)
-        x, y = analysis.collapse(common, None, c, g0)
-        fixed = analysis.fit_power_law(x, y, x_range=fit_range)
-        full = analysis.gap_distribution(grid, gap, pressure, bins_per_decade=bins_per_decade)
-        extent = analysis.fit_power_law(*analysis.collapse(full, None, c, g0)) \
-            if full.centres.size else None
-        fit.update(exponent=fixed.exponent, prefactor=fixed.prefactor, fit_points=fixed.npoints)
-        if extent is not None:
-            fit.update(power_law_x_min=extent.x_min, power_law_decades=extent.decades)
-    row.update(fit)
+    row.update(_gap_law(grid, gap, pressure, c, g0, fit_range, bins_per_decade))
     if adhesive or protocol:
         force = analysis.attractive_force_measured(grid, force_state.gap, model.interaction,
                                                    pressure=force_state.pressure)
@@ -469,6 +454,31 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
     del model, grid, hard, solutions, geometry, force_state, gap, pressure
     gc.collect()
     return row
+
+
+def _gap_law(grid, gap, pressure, c, g0, fit_range, bins_per_decade):
+    """The collapsed gap distribution's power law (Eq. 13) of one state, for a table row.
+
+    Fitted on common bins over ``fit_range`` of ``x = g / g0``, so that rungs compare;
+    its extent from all bins.  NaN (and no points) without partial contact.
+    """
+    fit = {"exponent": math.nan, "prefactor": math.nan, "fit_points": 0,
+           "power_law_x_min": math.nan, "power_law_decades": math.nan}
+    if not (0 < c < 1 and math.isfinite(g0) and g0 > 0):
+        return fit
+    lo, hi = fit_range
+    nbins = max(1, int(round(bins_per_decade * math.log10(hi / lo))))
+    edges = g0 * np.geomspace(lo, hi, nbins + 1)
+    common = analysis.gap_distribution(grid, gap, pressure, bins=edges)
+    x, y = analysis.collapse(common, None, c, g0)
+    fixed = analysis.fit_power_law(x, y, x_range=fit_range)
+    full = analysis.gap_distribution(grid, gap, pressure, bins_per_decade=bins_per_decade)
+    extent = analysis.fit_power_law(*analysis.collapse(full, None, c, g0)) \
+        if full.centres.size else None
+    fit.update(exponent=fixed.exponent, prefactor=fixed.prefactor, fit_points=fixed.npoints)
+    if extent is not None:
+        fit.update(power_law_x_min=extent.x_min, power_law_decades=extent.decades)
+    return fit
 
 
 # ====================================================================== a study
