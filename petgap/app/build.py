@@ -164,21 +164,20 @@ def check_options(scene, petsc_args=(), strict=False, log=None):
             "makes this an error", u, hint)
 
 
-#: Peak bytes per grid point of a run, for the estimate before anything is allocated
-#: (docs/benchmarks.md, "Memory per point"): the pressure solver (hard wall, periodic,
-#: pcg or pcg-pressure) in double or mixed precision, and in single; every other solve
-#: (adhesion, the solvers on the gap); a surface-only run (the FFT buffers and the
-#: topography).  Each is above a measured whole run's peak (double 43-45 bytes per point
-#: on one rank at 4096^2-16384^2 and 54 on two at 2048^2, single 24, adhesion 67 at
-#: 4096^2), with a margin for small grids, whose fixed costs weigh more, and for TAO's
-#: solvers (32 bytes per point more than the pressure solver).
+#: Peak bytes per grid point of a run, for the estimate before anything is allocated:
+#: the pressure solver (the registry's ``pcg-pressure`` on a periodic cell) in double or
+#: mixed precision, and in single; every other solve (adhesion, the solvers on the gap);
+#: a surface-only run (the FFT buffers and the topography).  Each lies above the
+#: measured peak of a whole run (docs/benchmarks.md, "Memory per point"), with a margin
+#: for small grids, whose fixed costs weigh more, and for TAO's solvers, which hold more
+#: fields than the pressure solver.
 BYTES_PER_POINT_PRESSURE = 56
 BYTES_PER_POINT_PRESSURE_SINGLE = 36
 BYTES_PER_POINT_SOLVE = 80
 BYTES_PER_POINT_SURFACE = 40
 #: The same for a free boundary: the hard wall adds the padded cell's FFT buffers and
-#: kernel (181-191 measured, docs/benchmarks.md, "Free boundary beside periodic");
-#: adhesion solves on the cell, four times the map's points.
+#: kernel (docs/benchmarks.md, "Free boundary beside periodic"); adhesion solves on the
+#: cell, four times the map's points.
 BYTES_PER_POINT_FREE = 200
 BYTES_PER_POINT_FREE_ADHESIVE = 4 * BYTES_PER_POINT_SOLVE + BYTES_PER_POINT_FREE
 #: The most points of a rank's (padded) slab: the kernels index it with 32-bit integers.
@@ -220,7 +219,8 @@ def check_size(scene, comm, solve=True):
     A :class:`~petgap.io.scene.SceneError` naming ``grid.nx``/``grid.ny`` if a
     rank's slab exceeds the kernels' 32-bit index range, or if the estimated
     peak memory of a rank (:data:`BYTES_PER_POINT_PRESSURE` or
-    :data:`BYTES_PER_POINT_PRESSURE_SINGLE` for the pressure solver,
+    :data:`BYTES_PER_POINT_PRESSURE_SINGLE` where the registry resolves the
+    scene's solver to the pressure solver (:func:`scene_case`),
     :data:`BYTES_PER_POINT_SOLVE` for other solves, on a free boundary
     :data:`BYTES_PER_POINT_FREE` or :data:`BYTES_PER_POINT_FREE_ADHESIVE`, or
     :data:`BYTES_PER_POINT_SURFACE` per point of its slab) exceeds what it
