@@ -220,7 +220,7 @@ def check_size(scene, comm, solve=True):
     rank's slab exceeds the kernels' 32-bit index range, or if the estimated
     peak memory of a rank (:data:`BYTES_PER_POINT_PRESSURE` or
     :data:`BYTES_PER_POINT_PRESSURE_SINGLE` where the registry resolves the
-    scene's solver to the pressure solver (:func:`scene_case`),
+    scene's solver to the pressure solver (:meth:`~petgap.io.scene.Scene.case`),
     :data:`BYTES_PER_POINT_SOLVE` for other solves, on a free boundary
     :data:`BYTES_PER_POINT_FREE` or :data:`BYTES_PER_POINT_FREE_ADHESIVE`, or
     :data:`BYTES_PER_POINT_SURFACE` per point of its slab) exceeds what it
@@ -241,7 +241,7 @@ def check_size(scene, comm, solve=True):
             f"rank{'s' if size > 1 else ''} is beyond the {MAX_SLAB_POINTS} points petgap's "
             f"kernels can index; allowed: at most {most_rows} rows of {ny} per rank: {fix}")
     per_point = BYTES_PER_POINT_SOLVE if solve else BYTES_PER_POINT_SURFACE
-    if solve and scene_case(scene).kind == "pcg-pressure":
+    if solve and scene.case().kind == "pcg-pressure":
         per_point = (BYTES_PER_POINT_PRESSURE_SINGLE if scene.solver.precision == "single"
                      else BYTES_PER_POINT_PRESSURE)
     if solve and not scene.surface.periodic:
@@ -274,19 +274,6 @@ def check_size(scene, comm, solve=True):
         f"({per_point} bytes per point of a {rows} x {ny} slab), more than a rank has: "
         f"{'; '.join(have)}; use more ranks (about {ranks}, on more nodes), a smaller grid, "
         f"or raise the limit")
-
-
-def scene_case(scene):
-    """What a scene's steps combine, in the registry's words (:mod:`petgap.io.solver_registry`).
-
-    A scene of the paper's protocol (``control.reference``) has adhesive steps.
-    """
-    control = scene.control
-    return registry.Case(solver=scene.solver.tao_type,
-                         control=None if control.kind == "none" else control.kind,
-                         adhesive=scene.interaction.kind != "hard-wall",
-                         periodic=scene.surface.periodic, precision=scene.solver.precision,
-                         tolerance=scene.solver.tolerance)
 
 
 def _is_number(text):

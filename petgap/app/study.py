@@ -63,7 +63,7 @@ from mpi4py import MPI
 
 from petgap import analysis
 from petgap.app.argtypes import number_in, positive_float
-from petgap.app.build import build, load_scene, make_grid, make_surface, scene_case
+from petgap.app.build import build, load_scene, make_grid, make_surface
 from petgap.app.study_report import StudyError, check_outputs, format_table, write_outputs
 from petgap.io import solver_registry as registry
 from petgap.io.solver_registry import SINGLE_TOLERANCE_FLOOR
@@ -198,7 +198,7 @@ def precision_ladder(scene):
     # what the registry says of the scene in mixed precision (single needs the same), the
     # tolerance left out: single runs at its floor (the paper's protocol has an adhesive
     # interaction: refused with it)
-    case = dataclasses.replace(scene_case(scene), precision="mixed", tolerance=None)
+    case = dataclasses.replace(scene.case(), precision="mixed", tolerance=None)
     refused = [r for r in registry.refusals(case) if r.key == "precision"]
     why = f"solver.precision single or mixed {refused[0].detail(registry.api_name)}" \
         if refused else None

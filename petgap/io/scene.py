@@ -903,6 +903,17 @@ class Scene:
             comm = MPI.COMM_WORLD
         return _build(root_decides(comm, parse))
 
+    def case(self):
+        """What the scene's solves combine, in the words of :mod:`petgap.io.solver_registry`.
+
+        (A scene of the paper's protocol, ``control.reference``, has adhesive steps.)
+        """
+        control = self.control
+        return _case({"interaction": self.interaction, "surface": self.surface},
+                     solver=self.solver.tao_type, precision=self.solver.precision,
+                     tolerance=self.solver.tolerance,
+                     control=None if control.kind == "none" else control.kind)
+
     def to_dict(self):
         """The resolved scene as nested plain data (JSON-serialisable), without the text."""
         out = {}
