@@ -263,9 +263,12 @@ class ContactProblem:
         """``make()``, made on the first call with this ``key`` and kept for later ones.
 
         For what a solver derives from the problem alone and reuses over the
-        steps of a sweep (the coarse problem of
-        :func:`petgap.solvers.coarse.coarse_problem`).  ``make`` must be
-        collective if it is, and every rank must ask for the same keys.
+        steps of a sweep (the full-contact load of
+        :func:`petgap.solvers.pressure_cg.full_contact_load`).  ``make`` must be
+        collective if it is, and every rank must ask for the same keys.  A solver's
+        cache belongs to the solver (as the padded cell's problem belongs to
+        :class:`petgap.solvers.free_boundary.PaddedCell`): this one goes once the
+        pressure solver's caller keeps the full-contact load.
         """
         if key not in self._derived:
             self._derived[key] = make()
