@@ -265,10 +265,7 @@ class ContactProblem:
         For what a solver derives from the problem alone and reuses over the
         steps of a sweep (the full-contact load of
         :func:`petgap.solvers.pressure_cg.full_contact_load`).  ``make`` must be
-        collective if it is, and every rank must ask for the same keys.  A solver's
-        cache belongs to the solver (as the padded cell's problem belongs to
-        :class:`petgap.solvers.free_boundary.PaddedCell`): this one goes once the
-        pressure solver's caller keeps the full-contact load.
+        collective if it is, and every rank must ask for the same keys.
         """
         if key not in self._derived:
             self._derived[key] = make()
