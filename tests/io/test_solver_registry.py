@@ -9,13 +9,7 @@ from petgap.io.solver_registry import Case, method, refusal, resolve
 from petgap.solvers.dispatch import petsc_options
 from petgap.solvers.settings import SolverSettings, read_settings
 
-SCENE = """
-[grid]
-nx = 32
-[surface]
-hurst = 0.8
-lambda_min = "8 a0"
-"""
+SCENE = '[grid]\nnx = 16\n[surface]\nhurst = 0.6\nlambda_min = "4 a0"\n'
 
 
 @pytest.mark.parametrize("control, adhesive, periodic, precision, kind", [
