@@ -168,9 +168,11 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
         ``load`` and ``mean_gap``; ``heights`` not a finite 2D array, or
         different between ranks; a non-positive ``pixel_size`` or
         ``contact_modulus``; an incomplete ``work_of_adhesion`` /
-        ``interaction_range`` pair; ``fields`` not one of :data:`FIELDS`.  Also
-        raised by the objects built (a flat surface, a grid that does not split
-        over ``comm``, an unknown ``solver``), on every rank alike.
+        ``interaction_range`` pair; ``fields`` not one of :data:`FIELDS`; what
+        the registry of solvers does not solve (:mod:`petgap.io.solver_registry`: an
+        unknown ``solver``, a tensile load on the hard wall).  Also raised by the
+        objects built (a flat surface, a grid that does not split over ``comm``),
+        on every rank alike.
 
     Examples
     --------
