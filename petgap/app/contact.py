@@ -29,6 +29,7 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.analysis.of_solution import contact_statistics_of
+from petgap.io import solver_registry as registry
 from petgap.mechanics import (ContactProblem, ElasticHalfSpace, ExponentialAdhesion,
                               FreeHalfSpace, HardWall, Load, MeanGap)
 from petgap.parallel import Grid
@@ -167,9 +168,11 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
         ``load`` and ``mean_gap``; ``heights`` not a finite 2D array, or
         different between ranks; a non-positive ``pixel_size`` or
         ``contact_modulus``; an incomplete ``work_of_adhesion`` /
-        ``interaction_range`` pair; ``fields`` not one of :data:`FIELDS`.  Also
-        raised by the objects built (a flat surface, a grid that does not split
-        over ``comm``, an unknown ``solver``), on every rank alike.
+        ``interaction_range`` pair; ``fields`` not one of :data:`FIELDS`; what
+        the registry of solvers does not solve (:mod:`petgap.io.solver_registry`: an
+        unknown ``solver``, a tensile load on the hard wall).  Also raised by the
+        objects built (a flat surface, a grid that does not split over ``comm``),
+        on every rank alike.
 
     Examples
     --------
@@ -183,7 +186,7 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
     comm = MPI.COMM_WORLD if comm is None else comm
     heights, (dx, dy), control, contact_modulus, interaction = _agreed(comm, lambda: _check(
         heights, pixel_size, load, mean_gap, contact_modulus, interaction, work_of_adhesion,
-        interaction_range, fields))
+        interaction_range, fields, solver, periodic))
     nx, ny = heights.shape
     grid = Grid((nx, ny), size=(nx * dx, ny * dy), comm=comm, planner=planner)
     body = ElasticHalfSpace(grid, contact_modulus) if periodic else \
@@ -236,16 +239,23 @@ def _agreed(comm, check):
 
 
 def _check(heights, pixel_size, load, mean_gap, contact_modulus, interaction, work, rho,
-           fields):
-    """The checked arguments of :func:`contact`, or a ValueError naming the first bad one."""
+           fields, solver, periodic):
+    """The checked arguments of :func:`contact`, or a ValueError naming the first bad one.
+
+    What the solve combines is the registry's to refuse
+    (:mod:`petgap.io.solver_registry`), before anything is made.
+    """
     heights = _check_heights(heights)
     pixel = _check_pixel_size(pixel_size)
     control = _check_control(load, mean_gap)
     contact_modulus = _positive("contact_modulus", contact_modulus)
     interaction = _check_interaction(interaction, work, rho)
-    if not interaction.adhesive and isinstance(control, Load) and control.mean_pressure < 0:
-        raise ValueError(f"load = {control.mean_pressure!r} is not allowed with the hard wall: "
-                         f"a non-adhesive contact cannot carry tension (need load >= 0)")
+    refusal = registry.refusal(registry.Case(
+        solver=solver, control=control.kind, adhesive=interaction.adhesive,
+        periodic=bool(periodic),
+        loads=(control.mean_pressure,) if isinstance(control, Load) else ()))
+    if refusal is not None:
+        raise ValueError(refusal.message())
     if fields not in FIELDS:
         raise ValueError(f"fields = {fields!r} is not one of {', '.join(map(repr, FIELDS))}")
     return heights, pixel, control, contact_modulus, interaction

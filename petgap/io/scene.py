@@ -37,6 +37,8 @@ import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+from petgap.io import solver_registry as registry
+from petgap.io.solver_registry import SINGLE_TOLERANCE_FLOOR
 from petgap.parallel.collective import root_decides
 
 __all__ = ["SceneError", "Scene", "GridSection", "SurfaceSection", "MaterialSection",
@@ -693,23 +695,16 @@ class ControlSection:
 
     @staticmethod
     def _check(values, ctx, problems):
-        interaction = ctx.get("interaction")
         vals = values.get("values")
+        case = _case(ctx, control=values["kind"],
+                     loads=vals if values["kind"] == "load" and isinstance(vals, tuple) else ())
+        _refused(case, ("control", "load"), ctx, problems, values=vals)
+        interaction = ctx.get("interaction")
         if values["kind"] == "load" and isinstance(vals, tuple) and interaction is not None \
-                and interaction.kind == "hard-wall" and min(vals) <= 0:
-            problems.append(("values", list(vals), "has a load <= 0 with a hard-wall interaction",
-                             "loads > 0 (a non-adhesive contact cannot carry tension)"))
-        surface = ctx.get("surface")
-        if values["kind"] == "indentation" and surface is not None and surface.periodic:
-            problems.append(("kind", "indentation", "needs a free boundary, and "
-                             "surface.periodic = true (on a periodic cell an approach fixes no "
-                             "load)", 'load or mean-gap, or surface.periodic = false'))
-        if values["kind"] == "indentation" and interaction is not None \
-                and interaction.kind != "hard-wall":
-            problems.append(("kind", "indentation", "is for the hard wall, and interaction.kind "
-                             f"= {json.dumps(interaction.kind)} (adhesion on a free boundary is "
-                             "solved on its padded cell, under load or mean gap)",
-                             'load or mean-gap, or interaction.kind = "hard-wall"'))
+                and interaction.kind == "hard-wall" and 0 in vals:
+            problems.append(("values", list(vals), f"item {vals.index(0)} (0) is a zero load "
+                             f"with a hard-wall interaction, where the surfaces only touch",
+                             "loads > 0 with the hard wall (a step that carries something)"))
         if values.get("reference") is not None and interaction is not None \
                 and interaction.kind != "exponential":
             problems.append(("reference", values["reference"],
@@ -718,31 +713,38 @@ class ControlSection:
                              'reference only with interaction.kind = "exponential"'))
 
 
-#: Smallest solver tolerance of ``solver.precision = "single"``: at least three
-#: times the rounding of the displacement in 32 bits (a few units in the last
-#: place of ``max|u|``, where the contact points are; up to 7.4e-7 ``h0`` on the
-#: benchmark surface at 8192^2), so that edge points flipping in and out of
-#: contact on that rounding do not decide when a solve ends (docs/accuracy.md,
-#: "Precision").
-SINGLE_TOLERANCE_FLOOR = 3e-6
+def _case(ctx, **known):
+    """What a scene combines, in the registry's words, from the sections built so far."""
+    interaction, surface = ctx.get("interaction"), ctx.get("surface")
+    return registry.Case(adhesive=None if interaction is None else
+                         interaction.kind != "hard-wall",
+                         periodic=None if surface is None else surface.periodic, **known)
 
 
-def precision_refusal(interaction_kind, tao_type, periodic):
-    """Why ``solver.precision`` single or mixed cannot solve such a scene, or None.
+#: The scene's key of each input the registry's rules name.
+_SCENE_KEYS = {"solver": "solver.tao_type", "precision": "solver.precision",
+               "tolerance": "solver.tolerance", "control": "control.kind",
+               "load": "control.values"}
 
-    ``(why, allowed)`` for the first of: an adhesive interaction, a solver other
-    than the pressure solver, a free boundary (None for a section not known).
-    The one rule for the scene check and for the study's precision ladder.
-    """
-    if interaction_kind is not None and interaction_kind != "hard-wall":
-        return (f"is for the non-adhesive pressure solver, and interaction.kind = "
-                f"{json.dumps(interaction_kind)}", '"double" with adhesion')
-    if tao_type not in ("pcg", "pcg-pressure"):
-        return (f"is for the pressure solver, and tao_type = {json.dumps(tao_type)}",
-                '"double", or tao_type = "pcg" or "pcg-pressure"')
-    if periodic is not None and not periodic:
-        return "is for a periodic cell, and surface.periodic = false", '"double" on a free boundary'
-    return None
+
+def _refused(case, keys, ctx, problems, values=None):
+    """Add the registry's refusals of ``case`` that blame ``keys`` to a section's problems."""
+    def name(key, value):
+        if key == "interaction":
+            return f"interaction.kind = {json.dumps(ctx['interaction'].kind)}"
+        if key == "boundary":
+            return f"surface.periodic = {_toml_repr(value)}"
+        return f"{_SCENE_KEYS[key]} = {_toml_repr(value)}"
+
+    for refusal in registry.refusals(case):
+        if refusal.key not in keys:
+            continue
+        key = _SCENE_KEYS[refusal.key].split(".")[1]
+        if refusal.key == "load":  # one of the section's values
+            problems.append((key, list(values), f"item {values.index(refusal.value)} "
+                             f"({refusal.value:g}) {refusal.detail(name)}", refusal.allowed))
+        else:
+            problems.append((key, refusal.value, refusal.detail(name), refusal.allowed))
 
 
 @dataclass(frozen=True)
@@ -753,8 +755,7 @@ class SolverSection:
     leading dash; options given after ``--`` on the command line come later and
     take precedence.
     """
-    tao_type: str = key(Choice("pcg", "pcg-pressure", "pcg-gap", "bncg", "blmvm", "bqnls",
-                               "gpcg"), "pcg",
+    tao_type: str = key(Choice(*registry.SOLVER_NAMES), "pcg",
                         "pcg: petgap's preconditioned projected conjugate gradients (on the "
                         "pressure for non-adhesive load control, on the gap otherwise; "
                         "pcg-pressure / pcg-gap force one); the others are TAO "
@@ -767,35 +768,22 @@ class SolverSection:
     petsc_options: tuple = key(OptionTable(), (), "extra PETSc options database entries")
     planner: str = key(Choice("estimate", "measure", "patient"), "measure",
                        "FFTW planner effort (plans are cached as wisdom on disk)")
-    precision: str = key(Choice("double", "single", "mixed"), "double",
+    precision: str = key(Choice(*registry.PRECISIONS), "double",
                          "floating point of the solve: double; single (fields and transforms "
                          "in 32 bits, sums in 64; half the memory, tolerance at least "
-                         "3e-6); mixed (a single solve refined in double to the tolerance). "
+                         f"{SINGLE_TOLERANCE_FLOOR:g}); mixed (a single solve refined in "
+                         "double to the tolerance). "
                          "single and mixed: non-adhesive, periodic, the pressure solver; "
                          "docs/accuracy.md has the trade")
 
     @staticmethod
     def _check(values, ctx, problems):
         control = ctx.get("control")
-        if control is not None and control.kind == "indentation" and values["tao_type"] not in \
-                ("pcg", "pcg-pressure"):
-            problems.append(("tao_type", values["tao_type"], "does not solve indentation "
-                             "control (the pressure solver does)", '"pcg" or "pcg-pressure"'))
-        precision = values["precision"]
-        if precision == "double":
-            return
-        interaction, surface = ctx.get("interaction"), ctx.get("surface")
-        refusal = precision_refusal(None if interaction is None else interaction.kind,
-                                    values["tao_type"], None if surface is None
-                                    else surface.periodic)
-        if refusal is not None:
-            problems.append(("precision", precision) + refusal)
-        elif precision == "single" and values["tolerance"] < SINGLE_TOLERANCE_FLOOR:
-            problems.append(("tolerance", values["tolerance"],
-                             "is below what single precision resolves (the gap is a "
-                             "difference of heights with 7 significant digits)",
-                             f'>= {SINGLE_TOLERANCE_FLOOR:g} with precision = "single", or '
-                             f'precision = "mixed" to refine in double'))
+        case = _case(ctx, solver=values["tao_type"], precision=values["precision"],
+                     tolerance=values["tolerance"],
+                     control=None if control is None or control.kind == "none"
+                     else control.kind)
+        _refused(case, ("solver", "precision", "tolerance"), ctx, problems)
 
     def petsc_args(self):
         """The options as a command-line style list ``["-name", "value", ...]``."""
@@ -914,6 +902,17 @@ class Scene:
             from mpi4py import MPI
             comm = MPI.COMM_WORLD
         return _build(root_decides(comm, parse))
+
+    def case(self):
+        """What the scene's solves combine, in the words of :mod:`petgap.io.solver_registry`.
+
+        (A scene of the paper's protocol, ``control.reference``, has adhesive steps.)
+        """
+        control = self.control
+        return _case({"interaction": self.interaction, "surface": self.surface},
+                     solver=self.solver.tao_type, precision=self.solver.precision,
+                     tolerance=self.solver.tolerance,
+                     control=None if control.kind == "none" else control.kind)
 
     def to_dict(self):
         """The resolved scene as nested plain data (JSON-serialisable), without the text."""

@@ -22,7 +22,7 @@ memory; its transforms are planned with FFTW's "estimate", so that a first
 run of a size does not spend longer planning the levels than solving on them.
 On a periodic cell the coarse levels are single precision whatever the
 fine grid's: a start is solved to :data:`COARSE_TOLERANCE`, far above what
-32 bits resolve (:data:`petgap.io.scene.SINGLE_TOLERANCE_FLOOR`), and in
+32 bits resolve (:data:`petgap.io.solver_registry.SINGLE_TOLERANCE_FLOOR`), and in
 single its transforms move half the bytes.  The fine solve takes the
 prolonged pressure in its own precision.
 

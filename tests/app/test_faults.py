@@ -360,7 +360,7 @@ def _bad_input_cases(d):
                                               'resolution_check = "error"\n\n[control]'),
          ["interaction not resolved by the grid", "range rho = 0.2 is 0.2 pixels"]),
         ("negative-load", SMALL.replace("0.002, 0.004", "0.002, -0.004"),
-         ["control.values", "load <= 0 with a hard-wall interaction"]),
+         ["control.values", "item 1 (-0.004) is tensile", 'interaction.kind = "hard-wall"']),
         ("topography-nan", FILE_SCENE.format(path="nan.npy", extra=""),
          ["nan.npy", "non-finite", "(3, 5)"]),
         ("topography-inf", FILE_SCENE.format(path="inf.npy", extra=""),
