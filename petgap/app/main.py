@@ -7,7 +7,9 @@
     PETSc's options database, after the scene's ``solver.petsc_options``
     (:mod:`petgap.app.run`).
 ``petgap check SCENE.toml``
-    Validate a scene and print its resolved values.
+    Make every check ``petgap run`` makes before it solves (the scene, its topography
+    file, its PETSc options, its size, memory and decomposition on the ranks it runs
+    on), and print the resolved values and the estimated peak memory per rank.
 ``petgap schema``
     Print the scene schema as a markdown table.
 ``petgap study SCENE.toml [--output-dir DIR] [--tolerances ...] [--resolutions ...] [--quick]``

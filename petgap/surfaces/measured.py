@@ -3,7 +3,7 @@
 petgap reads its own interchange formats (``.npy``, HDF5) slab by slab
 (:mod:`petgap.surfaces.topography`); every other file goes to SurfaceTopography
 (ContactEngineering's reader library, https://github.com/ContactEngineering/SurfaceTopography),
-which detects the format from the content and knows the instruments' metadata: the
+which reads the format the extension names and knows the instruments' metadata: the
 physical size of the map and the unit of its heights.  Formats read and tested here
 (tests/surfaces/test_measured.py): Igor binary waves (``.ibw``), WSxM (``.top``),
 netCDF as SurfaceTopography writes it (``.nc``), MATLAB (``.mat``), plain-text height
@@ -172,7 +172,7 @@ def time_bound(path, what="SurfaceTopography's reader"):
         with contextlib.redirect_stdout(io.StringIO()):
             yield
     except _Overtime:
-        raise ValueError(f"topography file {path}: {what} did not finish within {seconds:.0f} s "
+        raise ValueError(f"topography file {path}: {what} did not finish within {seconds:.3g} s "
                          f"and was stopped (a damaged or cut file makes some readers loop); "
                          f"check the file, or convert it to .npy or HDF5") from None
     finally:

@@ -794,18 +794,8 @@ INSTRUMENT_FILES = {
     "unknown-unit": ("good.top", wsxm(), "", ["units.length", "'furlong'", "'nm'"]),
 }
 
-MEASURED_SCENE = """
-[surface]
-kind = "file"
-path = "{path}"
-{extra}
-[control]
-kind = "load"
-values = [0.002]
-{units}
-[solver]
-planner = "estimate"
-"""
+#: A file scene that takes its grid from the file.
+MEASURED_SCENE = FILE_SCENE.replace("\n[grid]\nnx = 32\n", "")
 
 
 def _instrument_cases(d, commands=("check", "run")):
@@ -817,11 +807,11 @@ def _instrument_cases(d, commands=("check", "run")):
             content(d / file)
         else:
             (d / file).write_bytes(content)
-        units = '[units]\nlength = "furlong"\n' if name == "unknown-unit" else ""
+        if name == "unknown-unit":
+            extra += '\n[units]\nlength = "furlong"\n'
         for command in commands:
             scenes[name, command] = d / f"{name}-{command}.toml"
-            scenes[name, command].write_text(MEASURED_SCENE.format(path=file, extra=extra,
-                                                                   units=units))
+            scenes[name, command].write_text(MEASURED_SCENE.format(path=file, extra=extra))
     return scenes
 
 
@@ -879,21 +869,8 @@ def test_a_line_scan_is_refused_alike_on_any_number_of_ranks(comm, shared):
     assert one == two and "cannot be split" not in one and "fewer ranks" not in one
 
 
-INDENTER_SCENE = """
-[grid]
-nx = 32
-
-[surface]
-kind = "{kind}"
-radius = 1e-300
-
-[control]
-kind = "load"
-values = [0.002]
-
-[solver]
-planner = "estimate"
-"""
+INDENTER_SCENE = SMALL.replace('hurst = 0.8\nlambda_min = "8 a0"\nseed = 3',
+                              'kind = "{kind}"\nradius = 1e-300')
 
 
 def test_unresolved_indenters_and_check_agrees_with_run(comm, shared):
