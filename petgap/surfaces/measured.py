@@ -150,22 +150,28 @@ def time_bound(path, what="SurfaceTopography's reader"):
 
     A timer thread simulates a signal in the main thread (``_thread.interrupt_main``;
     no signal reaches the process, so MPI's threads are not disturbed), whose handler
-    raises where the reader is, at its next Python instruction: a loop in Python is
-    stopped, a single C call is not (none of SurfaceTopography's loops is one).  Off
-    the main thread no signal handler can be set, and the block runs unbounded.
+    raises where the reader is, at its next Python instruction: a loop in Python (as the
+    WSxM reader's) is stopped, a single long call into C is not.  Off the main thread no
+    signal handler can be set, and the block runs unbounded.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     seconds = READ_SECONDS + READ_SECONDS_PER_MIB * os.path.getsize(path) / 2**20
-    state = {"done": False}
+    state = {"done": False, "fired": False}
+
+    def fire():
+        state["fired"] = True
+        _thread.interrupt_main(signal.SIGALRM)
 
     def interrupt(signum, frame):
-        if not state["done"]:
+        if state["fired"] and not state["done"]:
             raise _Overtime
+        if callable(old):   # a real SIGALRM, meant for whoever handled it before
+            old(signum, frame)
 
     old = signal.signal(signal.SIGALRM, interrupt)
-    timer = threading.Timer(seconds, _thread.interrupt_main, args=(signal.SIGALRM,))
+    timer = threading.Timer(seconds, fire)
     timer.daemon = True
     timer.start()
     try:
