@@ -23,10 +23,11 @@ Unknown sections and keys are errors (with the nearest known name suggested);
 so are keys that do not apply to the chosen ``kind``.  Every error is a
 :class:`SceneError` whose message names the dotted key (``surface.hurst``), the
 offending value and what is allowed, except the errors of a topography file, which
-lead with the file and its reason (it is the file that is wrong, not the key that names
-it); all errors of a file are reported at once.  A scene is parsed on rank 0 only and the result, or the error, is
-broadcast, so that every rank of the communicator returns the same scene or
-raises the same :class:`SceneError` and none is left waiting in a collective.
+lead with the file and its reason (it is the file that is wrong, not the key that
+names it); all errors of a file are reported at once.  A scene is parsed on rank 0
+only and the result, or the error, is broadcast, so that every rank of the
+communicator returns the same scene or raises the same :class:`SceneError` and none
+is left waiting in a collective.
 """
 import dataclasses
 import difflib

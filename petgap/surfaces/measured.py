@@ -216,7 +216,7 @@ def check_wsxm_header(path, limit=1 << 20):
     has no ``[Header end]`` line (within the header size it states, or ``limit``
     bytes): SurfaceTopography's WSxM reader would read empty lines forever."""
     with open(path, "rb") as f:
-        if not f.read(len(WSXM_SIGNATURE)) == WSXM_SIGNATURE:
+        if f.read(len(WSXM_SIGNATURE)) != WSXM_SIGNATURE:
             return
         f.seek(0)
         head = f.read(limit)
