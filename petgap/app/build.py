@@ -33,7 +33,7 @@ from petgap.mechanics.free_half_space import FreeHalfSpace
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.interactions import ExponentialAdhesion, check_resolution
 from petgap.mechanics.problem import ContactProblem
-from petgap.parallel.grid import Grid
+from petgap.parallel.grid import Grid, check_decomposition
 from petgap.parallel.log import get_logger, timed
 from petgap.solvers.sweeps import SweepStep, sweep
 from petgap.solvers.tao import check_petsc_options
@@ -284,6 +284,30 @@ def _is_number(text):
         return False
 
 
+def preflight(scene, comm, *, petsc_args=(), strict=False, resolution_check=None, log=None):
+    """Every check of a scene that needs neither its grid nor its surface (collective), in
+    the order :func:`build` makes them: the PETSc options (:func:`check_options`), the
+    planned steps, the size and peak memory (:func:`check_size`), the decomposition of the
+    grid over ``comm`` and the adhesive interaction's resolution, where the scene (or
+    ``resolution_check``) makes an unresolved one an error.  ``petgap check`` runs it as
+    ``petgap run`` does.
+
+    Returns ``(steps, bytes)``: the planned steps and the estimated peak memory per rank.
+    """
+    check_options(scene, petsc_args, strict=strict, log=log)
+    steps = protocol.plan(scene)
+    need = check_size(scene, comm, solve=bool(steps))
+    check_decomposition(comm, scene.grid.nx, scene.grid.ny)
+    interaction = scene.interaction
+    mode = interaction.resolution_check if resolution_check is None else resolution_check
+    if steps and interaction.kind == "exponential" and mode == "error":
+        g = scene.grid
+        check_resolution(ExponentialAdhesion(interaction.work_of_adhesion, interaction.range),
+                         min(g.size[0] / g.nx, g.size[1] / g.ny),  # as the Grid computes them
+                         scene.material.contact_modulus, "error")
+    return steps, need
+
+
 @dataclass
 class Model:
     """What a scene builds to: the same on every rank, fields local.
@@ -393,9 +417,8 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
     Model
     """
     comm = MPI.COMM_WORLD if comm is None else comm
-    check_options(scene, petsc_args, strict=strict, log=log)
-    steps = protocol.plan(scene)
-    check_size(scene, comm, solve=bool(steps))
+    steps, _ = preflight(scene, comm, petsc_args=petsc_args, strict=strict,
+                         resolution_check=resolution_check, log=log)
     if steps and registry.grid_precision(scene.solver.precision) == "single":
         # The surface is made in double and rounded: the same surface as a double
         # run's (its random numbers are drawn in double), so that the two compare.

@@ -123,7 +123,8 @@ from petgap.app.argtypes import positive_float, positive_int, root_parser  # noq
 from petgap.app import overview, report  # noqa: E402
 from petgap.app.figures import fig2_series, fig3_series, figure2, figure3, figure4  # noqa: E402
 from petgap.app.tables import plain, plain_rows, write_csv, write_json  # noqa: E402
-from petgap.io.results import ResultFile, read_attrs, read_field, step_name  # noqa: E402
+from petgap.io.results import (ResultFile, read_attrs, read_field, step_name,  # noqa: E402
+                                unreadable)
 from petgap.mechanics.interactions import ExponentialAdhesion  # noqa: E402
 from petgap.parallel.collective import root_decides  # noqa: E402
 from petgap.parallel.grid import DecompositionError, Grid  # noqa: E402
@@ -224,7 +225,11 @@ def _check_result_file(path):
         raise PostError(f"{path}: cannot read: {exc}") from None
     if not ok:
         raise PostError(f"{path}: not an HDF5 file (and so not a petgap result file)")
-    with h5py.File(path, "r") as f:
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise PostError(f"{path}: {unreadable(exc)}") from None
+    with f:
         if "petgap_version" not in f.attrs:
             raise PostError(f"{path}: not a petgap result file (no root attribute "
                             f"'petgap_version')")

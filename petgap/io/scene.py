@@ -22,10 +22,12 @@ Validation
 Unknown sections and keys are errors (with the nearest known name suggested);
 so are keys that do not apply to the chosen ``kind``.  Every error is a
 :class:`SceneError` whose message names the dotted key (``surface.hurst``), the
-offending value and what is allowed; all errors of a file are reported at
-once.  A scene is parsed on rank 0 only and the result, or the error, is
-broadcast, so that every rank of the communicator returns the same scene or
-raises the same :class:`SceneError` and none is left waiting in a collective.
+offending value and what is allowed, except the errors of a topography file, which
+lead with the file and its reason (it is the file that is wrong, not the key that
+names it); all errors of a file are reported at once.  A scene is parsed on rank 0
+only and the result, or the error, is broadcast, so that every rank of the
+communicator returns the same scene or raises the same :class:`SceneError` and none
+is left waiting in a collective.
 """
 import dataclasses
 import difflib
@@ -416,7 +418,7 @@ def _file_grid(ctx):
                 found = read_header(path, surface.get("dataset"), surface.get("channel"),
                                     units.get("length", "1"))
             except Exception as exc:  # the surface section reports the file; no grid from it
-                found = {"error": str(exc)}
+                found = {"error": str(exc), "unreadable": True}
     ctx["_file_grid"] = found
     return found
 
@@ -427,6 +429,8 @@ def _grid_from_file(what):
         if header is None:
             raise _Missing("it is required (unless surface.kind = \"file\", whose file "
                            "gives it)")
+        if "unreadable" in header:
+            raise _Skip  # the file's own error, reported once by the surface section
         if "error" in header:
             raise _Missing(f"the topography file would give it, but: {header['error']}")
         if what == "nx":
@@ -599,6 +603,11 @@ class SurfaceSection:
 
     @staticmethod
     def _check(values, ctx, problems):
+        header = _file_grid(ctx) if values["kind"] == "file" else None
+        if header is not None and "unreadable" in header:
+            problems.append((None, None, header["error"], None))  # it leads with the file
+        if values["kind"] in INDENTERS:
+            _check_radius(values, ctx.get("grid"), problems)
         if values["kind"] != "self-affine":
             return
         grid = ctx.get("grid")
@@ -622,6 +631,17 @@ class SurfaceSection:
                              f"is given together with rms_height = {values['rms_height']:g}",
                              "exactly one of rms_slope and rms_height (rms_slope = 0.1 if "
                              "neither is given)"))
+
+
+def _check_radius(values, grid, problems):
+    """An indenter's radius must span a pixel.  A smaller one is not resolved: a sphere's
+    cap falls between the pixels (the surface is flat), a flat punch is one pixel, and a
+    paraboloid's or cylinder's slope passes 1 within a pixel of the apex, outside the
+    small-slope half-space, on its way to depths whose squares overflow."""
+    if grid is not None and values["radius"] < min(grid.dx, grid.dy):
+        problems.append(("radius", values["radius"], f"is smaller than a pixel: the "
+                         f"{values['kind']} is not resolved by the grid",
+                         f"radius >= {min(grid.dx, grid.dy):g} (a pixel, min(dx, dy))"))
 
 
 @dataclass(frozen=True)
@@ -866,7 +886,7 @@ class Scene:
 
         def parse():
             try:
-                text = path.read_text(encoding="utf-8")
+                text = path.read_text(encoding="utf-8-sig")  # a byte-order mark is no error
             except FileNotFoundError:
                 raise SceneError(f"scene file {path} not found") from None
             except (OSError, UnicodeDecodeError) as exc:
@@ -1119,10 +1139,11 @@ def _parse_section(name, cls, table, ctx, all_keys, errors):
             invalid.add(k)
 
     if not invalid and len(errors) == n_errors and hasattr(cls, "_check"):
-        problems = []
+        problems = []  # (key, value, problem, allowed); key None: problem is the whole line
         cls._check(values, ctx, problems)
         for k, value, problem, allowed in problems:
-            errors.append(f"{name}.{k} = {_toml_repr(value)}: {problem}; allowed: {allowed}")
+            errors.append(problem if k is None else
+                          f"{name}.{k} = {_toml_repr(value)}: {problem}; allowed: {allowed}")
     ctx.pop("_section", None)
     if invalid or len(errors) != n_errors:
         return None
