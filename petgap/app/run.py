@@ -451,6 +451,11 @@ def _log_solution(log, step, solution):
     if not solution.converged:
         log.warning("step %d did not converge: %s; stored with converged = False",
                     step.index, solution.reason)
+    if solution.reason == "stalled_round_off":
+        log.warning("step %d: the KKT residual stopped falling at %.2e, above the tolerance, "
+                    "where round-off decides the steps; ask for a tolerance above it, or "
+                    "solver.tao_type = \"pcg\" (single precision: precision = \"mixed\")",
+                    step.index, max(solution.kkt_pressure, solution.kkt_gap))
 
 
 def _log_statistics(log, stats):

@@ -40,6 +40,15 @@ from petgap.solvers.settings import PETGAP_OPTIONS
 _REASONS = {v: k for k, v in vars(PETSc.TAO.Reason).items() if not k.startswith("_")}
 
 
+#: A TAO built-in stops as ``"stalled_round_off"`` when its KKT residual has not fallen
+#: below ``TAO_STALL_FACTOR`` times its best for ``TAO_STALL_ITERATIONS`` iterations, or
+#: for twice the iterations it took to reach that best if more: its line search then
+#: compares energies whose differences are below double round-off, and more iterations
+#: do not move it.  The window is wide because a healthy built-in solve can sit on a
+#: plateau for a couple of hundred iterations before it falls again.
+TAO_STALL_ITERATIONS = 500
+TAO_STALL_FACTOR = 0.9
+
 #: Options that set TAO monitors printing the objective.
 TAO_MONITORS = ("tao_monitor", "tao_smonitor", "tao_cmonitor", "tao_gmonitor")
 
@@ -231,6 +240,7 @@ class _GapCallbacks:
         self.comm = scaled.problem.grid.comm
         self.tolerance, self.monitor = tolerance, monitor
         self.residual, self.key = None, None
+        self.best, self.best_at, self.stalled = np.inf, 0, False
 
     @staticmethod
     def fingerprint(xa):
@@ -259,8 +269,18 @@ class _GapCallbacks:
             tao.setConvergedReason(PETSc.TAO.Reason.CONVERGED_USER)
         elif it >= tao.getMaximumIterations():
             tao.setConvergedReason(PETSc.TAO.Reason.DIVERGED_MAXITS)
+        elif self._stalls(it, residual):
+            self.stalled = True
+            tao.setConvergedReason(PETSc.TAO.Reason.DIVERGED_USER)
         else:
             tao.setConvergedReason(PETSc.TAO.Reason.CONTINUE_ITERATING)
+
+    def _stalls(self, it, residual):
+        """Whether the residual has stopped falling (:data:`TAO_STALL_ITERATIONS`)."""
+        if residual < TAO_STALL_FACTOR * self.best:
+            self.best, self.best_at = residual, it
+            return False
+        return it - self.best_at >= max(TAO_STALL_ITERATIONS, 2 * self.best_at)
 
     def update_hessian(self, tao, xv, H, P):
         H.getPythonContext().set_point(xv.getArray(readonly=True).reshape(self.shape))
@@ -296,7 +316,8 @@ def _gap_tao(problem, control, tao, x, kind, settings, initial, monitor, timer):
         tao.setFromOptions()
         tao.solve()
         reason_code = tao.getConvergedReason()
-        reason = _REASONS.get(reason_code, str(reason_code)).lower()
+        reason = ("stalled_round_off" if calls.stalled
+                  else _REASONS.get(reason_code, str(reason_code)).lower())
         converged = reason_code == PETSc.TAO.Reason.CONVERGED_USER
         g = scaled.physical_gap(x.getArray(readonly=True).reshape(shape))  # the scratch, kept
         pressure = problem.elastic_pressure(g) + mean_pressure
