@@ -80,17 +80,20 @@ class _Fields:
         self.pel = np.empty(grid.local_shape)
         self.t = np.zeros(grid.local_shape)
         self.vp = np.empty(grid.local_shape) if self.adhesive else self.pel
-        self.divisor = law.curvature_from_stress if self.adhesive else 1.0
-        self.vpp = np.empty(grid.local_shape) if self.divisor is None else None
+        divisor = law.curvature_from_stress if self.adhesive else 1.0
+        self.vpp = np.empty(grid.local_shape) if divisor is None else None
+        self.divisor = 1.0 if divisor is None else divisor  # not read with a v'' field
         # the step cap (an adhesive law's length scale), and the step of a direction
         # with no curvature: the hard wall's is the length unit, as it only meets
         # one through round-off
         self.cap = law.length_scale if self.adhesive else 1.0
+        # points whose v' jumped (a law with jumps counts them; see _multiplier)
+        self.jumps, self.crossed = bool(law.jumps), 0
 
     def fill_stress(self):
         """``v'`` (and ``v''``) at the current gap, by the law's kernel."""
         if self.adhesive:
-            _pass(self.law.fill_stress, self.g, self.vp, self.vpp)
+            self.crossed = _pass(self.law.fill_stress, self.g, self.vp, self.vpp)
 
     def load_gap(self):
         """The FFT buffer = ``g + h``, the field ``K`` maps to ``p_el``."""
@@ -212,6 +215,12 @@ def _multiplier(f, s, history):
     points it decides).  Under mean-gap control ``P0 = -mean_F(grad)``, the
     multiplier of the mean constraint; the residual is ``max_F |grad + P0|``
     over ``h0' E*``.
+
+    The recurrence restarts when a point crossed a jump of ``v'`` (a law with
+    ``jumps``, e.g. Maugis-Dugdale at ``delta``): its gradient changed by the
+    jump, which the old direction knows nothing of, as for a point released
+    from the wall (:func:`_released_strongly`).  The count rides on the free
+    set's reduction.
     """
     comm = f.comm
     if not f.load:
@@ -219,7 +228,11 @@ def _multiplier(f, s, history):
                                                     f.adhesive))
         s.lam_f = -s_open / s.n_open if s.n_open > 0 else 0.0
     s_free, n_free, gmax, gmin = _pass(_k.gcg_free_sums, f.pel, f.g, f.vp, f.adhesive, s.lam_f)
-    s_free, s.n_free = global_sums(comm, s_free, n_free)
+    if f.jumps:
+        s_free, s.n_free, crossed = global_sums(comm, s_free, n_free, f.crossed)
+        s.beta_ok = s.beta_ok and crossed == 0
+    else:
+        s_free, s.n_free = global_sums(comm, s_free, n_free)
     if s.beta_ok and not f.load and s.n_free > s.n_open:
         s.beta_ok = not _released_strongly(f, s, history)
     ext = np.array([gmax, -gmin])

@@ -21,13 +21,22 @@ def exponential_stress(const double[:, ::1] g, double[:, ::1] vp, double w, doub
 
 
 def maugis_dugdale_stress(const double[:, ::1] g, double[:, ::1] vp, double w, double delta):
-    """``vp = w / delta`` where ``g < delta``, ``0`` elsewhere."""
+    """``vp = w / delta`` where ``g < delta``, ``0`` elsewhere.
+
+    Returns the number of points whose ``vp`` changed: those that crossed ``delta``
+    since ``vp`` was last filled (the jumps of ``v'`` the gap solver restarts on).
+    """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double sigma = w / delta
+    cdef double sigma = w / delta, v
+    cdef long crossed = 0
     with nogil:
         for i in range(m):
             for j in range(n):
-                vp[i, j] = sigma if g[i, j] < delta else 0.0
+                v = sigma if g[i, j] < delta else 0.0
+                if v != vp[i, j]:
+                    crossed += 1
+                vp[i, j] = v
+    return crossed
 
 
 def squared_exponential_stress(const double[:, ::1] g, double[:, ::1] vp, double[:, ::1] vpp,

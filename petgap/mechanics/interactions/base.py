@@ -11,6 +11,8 @@ A law knows itself, so that no caller reads its parameters:
   of gaps (NumPy; for analysis, the objective and tests);
 * ``fill_stress(gap, vp, vpp)``: the fused per-point kernel of the gap solver,
   one compiled pass that writes ``v'`` and, where the law needs one, ``v''``;
+  a law whose ``v'`` jumps (``jumps``) also counts the points that crossed a
+  jump since ``vp`` was last filled, on which the solver restarts;
   ``curvature_from_stress`` says when it needs none: a length ``L`` with
   ``v'' = -v' / L`` (the exponential, ``L = rho``; ``inf`` for ``v'' = 0``),
   which the solver's curvature pass applies to ``v'`` itself, so that no
@@ -43,6 +45,8 @@ class InteractionLaw:
     PARAMETERS = ()
     #: ``L`` with ``v'' = -v' / L`` (no ``v''`` field in the gap solver), or None.
     curvature_from_stress = math.inf
+    #: Whether ``v'`` jumps somewhere (then ``fill_stress`` counts the crossings).
+    jumps = False
 
     def energy(self, gap):
         """``v(g)``."""
@@ -59,12 +63,15 @@ class InteractionLaw:
     def fill_stress(self, gap, vp, vpp=None):
         """``vp = v'(gap)`` (and ``vpp = v''(gap)`` if given) in one pass; the gap solver's kernel.
 
-        This NumPy version serves a law without a compiled kernel; the laws of
-        the registry override it with their kernels in :mod:`._laws`.
+        Returns the number of points whose ``v'`` jumped since ``vp`` was last
+        filled (0 for a law without jumps).  This NumPy version serves a smooth
+        law without a compiled kernel; the laws of the registry override it
+        with their kernels in :mod:`._laws`.
         """
         vp[...] = self.derivative(gap)
         if vpp is not None:
             vpp[...] = self.curvature(gap)
+        return 0
 
     def attributes(self):
         """The law as result-file attributes: ``kind`` and each parameter's key."""

@@ -19,8 +19,12 @@ How the gap solver handles it, without smoothing:
   the kink), so the KKT conditions with ``v'`` as defined here hold at the
   solution;
 * steps are capped at ``delta`` per point (the law's length scale, as for
-  every adhesive law), so a point crosses the jump at most once per step, and
-  the conjugate gradients restart after a capped step.
+  every adhesive law), so a point crosses the jump at most once per step;
+* the conjugate gradients restart whenever a point crossed ``delta``
+  (``jumps``; the kernel counts the crossings as it fills ``v'``): the jump
+  changes that point's gradient by ``w / delta``, which the old direction knows
+  nothing of, and without the restart a receding cohesive zone (at pull-off)
+  shrinks by a ring of pixels per iteration.
 """
 from dataclasses import dataclass
 
@@ -50,6 +54,7 @@ class MaugisDugdaleAdhesion(AdhesionLaw):
     ZONE = "E* delta^2 / w"
     #: ``v'' = 0`` (``-v' / inf``) away from ``delta``: no field of it.
     curvature_from_stress = np.inf
+    jumps = True
 
     def energy(self, gap):
         """``v(g)``."""
@@ -69,5 +74,5 @@ class MaugisDugdaleAdhesion(AdhesionLaw):
         return self.work / self.range
 
     def fill_stress(self, gap, vp, vpp=None):
-        """``vp = v'(gap)``."""
-        _laws.maugis_dugdale_stress(gap, vp, self.work, self.range)
+        """``vp = v'(gap)``; returns the number of points that crossed ``delta`` since the last fill."""
+        return _laws.maugis_dugdale_stress(gap, vp, self.work, self.range)

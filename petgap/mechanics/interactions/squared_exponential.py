@@ -66,3 +66,4 @@ class SquaredExponentialAdhesion(AdhesionLaw):
     def fill_stress(self, gap, vp, vpp=None):
         """``vp = v'(gap)`` and ``vpp = v''(gap)`` in one pass, one exponential per point."""
         _laws.squared_exponential_stress(gap, vp, vpp, self.work, self.range)
+        return 0
