@@ -84,7 +84,10 @@ def maugis_state(contact_radius, lam):
 
 
 def _force_at_vanishing_contact(lam):
-    """``P_`` at ``A -> 0``: ``C = m A`` solves ``lambda pi C^2 / 4 + (4/3)(pi/2 - 1) lambda^2 C = 1``."""
+    """``P_`` at ``A -> 0``, where ``C = m A`` solves the first equation's limit.
+
+    ``lambda pi C^2 / 4 + (4/3)(pi/2 - 1) lambda^2 C = 1``, and ``P_ = -lambda pi C^2 / 2``.
+    """
     b = 4.0 / 3.0 * (0.5 * math.pi - 1.0) * lam * lam
     q = 0.25 * lam * math.pi
     c = (-b + math.sqrt(b * b + 4.0 * q)) / (2.0 * q)

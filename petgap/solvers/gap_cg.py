@@ -83,9 +83,9 @@ class _Fields:
         divisor = law.curvature_from_stress if self.adhesive else 1.0
         self.vpp = np.empty(grid.local_shape) if divisor is None else None
         self.divisor = 1.0 if divisor is None else divisor  # not read with a v'' field
-        # the step cap (an adhesive law's length scale), and the step of a direction
-        # with no curvature: the hard wall's is the length unit, as it only meets
-        # one through round-off
+        # the step cap and the step along a direction without curvature: an adhesive
+        # law's length scale; the hard wall has no length, and takes one length unit
+        # there (round-off, or a rigid mode under load control)
         self.cap = law.length_scale if self.adhesive else 1.0
         # points whose v' jumped (a law with jumps counts them; see _multiplier)
         self.jumps, self.crossed = bool(law.jumps), 0

@@ -59,7 +59,7 @@ def sphere_law(cls, lam, zone):
 
 
 def pull_off(comm, n, law, radius, approaches):
-    """``(least force / (pi w R), states)`` of a mean-gap sweep through ``approaches`` beyond touch."""
+    """``(least force / (pi w R), states)``: a mean-gap sweep through ``approaches`` past touch."""
     grid = Grid((n, n), comm=comm, planner="estimate", wisdom=False)
     x, y = grid.local_positions()
     # centred off the pixels: a sphere on a pixel's centre has rings of 4 or 8 pixels at

@@ -11,12 +11,12 @@ A law knows itself, so that no caller reads its parameters:
   of gaps (NumPy; for analysis, the objective and tests);
 * ``fill_stress(gap, vp, vpp)``: the fused per-point kernel of the gap solver,
   one compiled pass that writes ``v'`` and, where the law needs one, ``v''``;
-  a law whose ``v'`` jumps (``jumps``) also counts the points that crossed a
-  jump since ``vp`` was last filled, on which the solver restarts;
   ``curvature_from_stress`` says when it needs none: a length ``L`` with
   ``v'' = -v' / L`` (the exponential, ``L = rho``; ``inf`` for ``v'' = 0``),
   which the solver's curvature pass applies to ``v'`` itself, so that no
-  ``v''`` field is held;
+  ``v''`` field is held; a law whose ``v'`` jumps (``jumps``) also counts the
+  points that crossed a jump since ``vp`` was last filled, on which the
+  solver restarts;
 * ``adhesive``, ``work`` (``w = -v(0)``), ``length_scale`` (the gap over which
   ``v'`` changes: what the gap solver caps a step at and what the free
   boundary's reach multiplies), ``max_attraction`` (the largest ``v'``) and
@@ -26,11 +26,13 @@ A law knows itself, so that no caller reads its parameters:
   are also the result file's ``interaction.*`` attributes
   (:meth:`attributes`, :meth:`from_attributes`).
 
-A new law is a frozen dataclass deriving from :class:`AdhesionLaw` in a module of
-its own, plus one line in the registry (:mod:`petgap.mechanics.interactions`).
+A new law is a class deriving from :class:`AdhesionLaw` (a frozen dataclass of
+``work`` and ``range``) in a module of its own, plus one line in the registry
+(:mod:`petgap.mechanics.interactions`); a compiled kernel in :mod:`._laws` is
+for speed only.
 """
 import math
-from dataclasses import fields
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -85,15 +87,26 @@ class InteractionLaw:
         return cls(*(get(key) for key, _ in cls.PARAMETERS))
 
 
+@dataclass(frozen=True)
 class AdhesionLaw(InteractionLaw):
     """Base of the adhesive laws: frozen dataclasses of positive, finite parameters.
 
-    Subclasses give ``name``, ``LENGTH`` (the symbol of ``length_scale`` in
-    messages, e.g. ``"rho"``), ``ZONE`` (the process zone's formula in messages),
-    ``energy``, ``derivative``, ``curvature``, ``max_attraction`` and, for speed,
+    Parameters (of every law here)
+    ------------------------------
+    work : float
+        The work of adhesion ``w = -v(0)``, energy per area.
+    range : float
+        The law's length (``rho``, ``delta``, ``z0``): its ``length_scale``.
+
+    Subclasses (plain classes: the dataclass is inherited) give ``name``,
+    ``LENGTH`` (the symbol of ``length_scale`` in messages, e.g. ``"rho"``),
+    ``ZONE`` (the process zone's formula in messages), ``energy``,
+    ``derivative``, ``curvature``, ``max_attraction`` and, for speed,
     ``fill_stress``.
     """
 
+    work: float
+    range: float
     adhesive = True
     PARAMETERS = (("work_of_adhesion", "work"), ("range", "range"))
     LENGTH = "range"

@@ -7,31 +7,16 @@ at the wall (``w / rho``); ``v'' = -v' / rho < 0`` everywhere, so the problem is
 non-convex for small ``rho``, and the gap solver derives ``v''`` from ``v'`` in
 its curvature pass instead of holding a field of it.
 """
-from dataclasses import dataclass
-
 import numpy as np
 
 from petgap.mechanics.interactions import _laws
 from petgap.mechanics.interactions.base import AdhesionLaw
 
 
-@dataclass(frozen=True)
 class ExponentialAdhesion(AdhesionLaw):
-    """``v(g) = -w exp(-g / rho)`` per unit area.
+    """``v(g) = -w exp(-g / rho)`` per unit area, with ``work = w`` and ``range = rho``."""
 
-    Parameters
-    ----------
-    work : float
-        Work of adhesion ``w`` (energy per area), positive.
-    range : float
-        Interaction range ``rho`` (length), positive.
-    """
-
-    work: float
-    range: float
-    name = "exponential"
-    LENGTH = "rho"
-    ZONE = "E* rho^2 / w"
+    name, LENGTH, ZONE = "exponential", "rho", "E* rho^2 / w"
 
     @property
     def curvature_from_stress(self):

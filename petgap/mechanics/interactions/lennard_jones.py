@@ -25,32 +25,20 @@ of the gap solver, what the free boundary's reach multiplies).
 ``v''`` is not a multiple of ``v'``: the gap solver holds it as one more field,
 filled in the same pass as ``v'`` (no transcendental function: powers of ``s``).
 """
-from dataclasses import dataclass
-
 import numpy as np
 
 from petgap.mechanics.interactions import _laws
 from petgap.mechanics.interactions.base import AdhesionLaw
 
 
-@dataclass(frozen=True)
 class LennardJones93Adhesion(AdhesionLaw):
-    """9-3 Lennard-Jones with the wall at its minimum.
+    """9-3 Lennard-Jones, the wall at its minimum: ``work = w`` (its depth), ``range = z0``.
 
-    ``v(g) = (w / 2) (s^9 - 3 s^3)`` with ``s = z0 / (z0 + g)``.
-
-    Parameters
-    ----------
-    work : float
-        Work of adhesion ``w``, the depth of the potential (energy per area), positive.
-    range : float
-        ``z0``, the equilibrium distance (length), positive.
+    ``v(g) = (w / 2) (s^9 - 3 s^3)`` with ``s = z0 / (z0 + g)``, ``z0`` the
+    equilibrium distance.
     """
 
-    work: float
-    range: float
-    name = "lennard-jones-9-3"
-    LENGTH = "z0"
+    name, LENGTH = "lennard-jones-9-3", "z0"
     curvature_from_stress = None
 
     def _s(self, gap):

@@ -19,39 +19,24 @@ How the gap solver handles it, without smoothing:
   the kink), so the KKT conditions with ``v'`` as defined here hold at the
   solution;
 * steps are capped at ``delta`` per point (the law's length scale, as for
-  every adhesive law), so a point crosses the jump at most once per step;
+  every adhesive law): no step carries a point across more than the width of
+  the attraction;
 * the conjugate gradients restart whenever a point crossed ``delta``
   (``jumps``; the kernel counts the crossings as it fills ``v'``): the jump
   changes that point's gradient by ``w / delta``, which the old direction knows
   nothing of, and without the restart a receding cohesive zone (at pull-off)
   shrinks by a ring of pixels per iteration.
 """
-from dataclasses import dataclass
-
 import numpy as np
 
 from petgap.mechanics.interactions import _laws
 from petgap.mechanics.interactions.base import AdhesionLaw
 
 
-@dataclass(frozen=True)
 class MaugisDugdaleAdhesion(AdhesionLaw):
-    """``v(g) = -w (1 - g / delta)`` for ``g < delta``, ``0`` beyond.
+    """``v(g) = -w (1 - g / delta)`` below ``delta``, 0 beyond; ``work = w``, ``range = delta``."""
 
-    Parameters
-    ----------
-    work : float
-        Work of adhesion ``w`` (energy per area), positive.
-    range : float
-        ``delta``, the gap at which the attraction ends (length), positive; the
-        attraction is ``sigma0 = w / delta`` below it.
-    """
-
-    work: float
-    range: float
-    name = "maugis-dugdale"
-    LENGTH = "delta"
-    ZONE = "E* delta^2 / w"
+    name, LENGTH, ZONE = "maugis-dugdale", "delta", "E* delta^2 / w"
     #: ``v'' = 0`` (``-v' / inf``) away from ``delta``: no field of it.
     curvature_from_stress = np.inf
     jumps = True
@@ -74,5 +59,5 @@ class MaugisDugdaleAdhesion(AdhesionLaw):
         return self.work / self.range
 
     def fill_stress(self, gap, vp, vpp=None):
-        """``vp = v'(gap)``; returns the number of points that crossed ``delta`` since the last fill."""
+        """``vp = v'(gap)``; returns how many points crossed ``delta`` since the last fill."""
         return _laws.maugis_dugdale_stress(gap, vp, self.work, self.range)

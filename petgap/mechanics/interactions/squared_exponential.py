@@ -14,31 +14,16 @@ changes sign at ``rho``): the gap solver holds it as one more field, filled in t
 same pass as ``v'`` from the same exponential.
 """
 import math
-from dataclasses import dataclass
-
 import numpy as np
 
 from petgap.mechanics.interactions import _laws
 from petgap.mechanics.interactions.base import AdhesionLaw
 
 
-@dataclass(frozen=True)
 class SquaredExponentialAdhesion(AdhesionLaw):
-    """``v(g) = -w exp(-g^2 / (2 rho^2))`` per unit area.
+    """``v(g) = -w exp(-g^2 / (2 rho^2))``: ``work = w``, ``range = rho`` (where ``v'`` peaks)."""
 
-    Parameters
-    ----------
-    work : float
-        Work of adhesion ``w`` (energy per area), positive.
-    range : float
-        ``rho``, the gap of the largest attraction (length), positive.
-    """
-
-    work: float
-    range: float
-    name = "squared-exponential"
-    LENGTH = "rho"
-    ZONE = "e E* rho^2 / w"
+    name, LENGTH, ZONE = "squared-exponential", "rho", "e E* rho^2 / w"
     curvature_from_stress = None
 
     def _bell(self, gap):
