@@ -31,7 +31,7 @@ from petgap.io import solver_registry as registry
 from petgap.io.scene import Scene, SceneError
 from petgap.mechanics.free_half_space import FreeHalfSpace
 from petgap.mechanics.half_space import ElasticHalfSpace
-from petgap.mechanics.interactions import ExponentialAdhesion, check_resolution
+from petgap.mechanics.interactions import check_resolution, from_scene
 from petgap.mechanics.problem import ContactProblem
 from petgap.parallel.grid import Grid, check_decomposition
 from petgap.parallel.log import get_logger, timed
@@ -323,7 +323,8 @@ class Model:
         The hard-wall problem.
     adhesive_problem : petgap.mechanics.problem.ContactProblem or None
         The problem with the scene's adhesive interaction, if it has one.
-    interaction : petgap.mechanics.interactions.ExponentialAdhesion or None
+    interaction : petgap.mechanics.interactions.AdhesionLaw or None
+        The scene's adhesive law (:func:`petgap.mechanics.interactions.from_scene`).
     resolution : dict or None
         :func:`~petgap.mechanics.interactions.check_resolution`'s report on
         the adhesive interaction.
@@ -454,8 +455,8 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
             model.half_space = FreeHalfSpace(grid, modulus)
     model.problem = ContactProblem(grid, topography, model.half_space)
     interaction = scene.interaction
-    if interaction.kind == "exponential":
-        law = ExponentialAdhesion(interaction.work_of_adhesion, interaction.range)
+    law = from_scene(interaction)
+    if law.adhesive:
         mode = interaction.resolution_check if resolution_check is None else resolution_check
         model.resolution = check_resolution(law, min(grid.dx, grid.dy), modulus, mode)
         model.interaction = law

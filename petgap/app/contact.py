@@ -32,6 +32,7 @@ from petgap.analysis.of_solution import contact_statistics_of
 from petgap.io import solver_registry as registry
 from petgap.mechanics import (ContactProblem, ElasticHalfSpace, ExponentialAdhesion,
                               FreeHalfSpace, HardWall, Load, MeanGap)
+from petgap.mechanics.interactions import LAWS
 from petgap.parallel import Grid
 from petgap.solvers import solve
 
@@ -131,7 +132,8 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
         for the hard wall, any sign with adhesion) or the mean gap (``> 0``).
     contact_modulus : float
         ``E*`` (paper Eq. 4), positive; pressures come out in its unit.
-    interaction : petgap.mechanics.interactions.HardWall or ExponentialAdhesion, optional
+    interaction : an interaction law of :data:`petgap.mechanics.interactions.LAWS`, optional
+        E.g. :class:`~petgap.mechanics.interactions.MaugisDugdaleAdhesion`.
         Default: the hard wall, or, with ``work_of_adhesion`` and
         ``interaction_range``, ``ExponentialAdhesion(work_of_adhesion,
         interaction_range)`` (``v(g) = -w exp(-g / rho)``, paper Eq. 6).
@@ -312,9 +314,9 @@ def _check_interaction(interaction, work, rho):
     if work is None and rho is None:
         if interaction is None:
             return HardWall()
-        if not isinstance(interaction, (HardWall, ExponentialAdhesion)):
+        if not isinstance(interaction, tuple(LAWS.values())):
             raise ValueError(f"interaction = {interaction!r} is not allowed: need a HardWall "
-                             f"or an ExponentialAdhesion")
+                             f"or an adhesive law ({', '.join(c.__name__ for c in LAWS.values())})")
         return interaction
     if interaction is not None:
         raise ValueError("give interaction or work_of_adhesion and interaction_range, not both")

@@ -22,6 +22,7 @@ from petgap.io.results import (OutputPathError, ResultExistsError, ResultFile,
                                 check_free_space, existing_result, output_path_error)
 from petgap.io.lock import ResultLock, lock_path
 from petgap.io.scene import schema_default
+from petgap.mechanics.interactions import HardWall
 from petgap.mechanics.problem import Indentation, Load, MeanGap
 from petgap.parallel.collective import root_decides
 from petgap.solvers.convergence import ResidualTrend
@@ -318,13 +319,12 @@ def _run_steps(model, output, log, resume):
 def _write_step(model, output, step, solution):
     """Write one solved step into the result file (collective); returns its summary."""
     scene, grid, comm = model.scene, model.grid, model.grid.comm
-    interaction, stats, fields = scene.interaction, model.statistics, scene.output.fields
+    stats, fields = model.statistics, scene.output.fields
     scalars = solution.scalars()
+    law = model.interaction if step.adhesive else HardWall()
     attrs = {"plan": step.attrs(), "solution": scalars,
-             "interaction": {"kind": "exponential" if step.adhesive else "hard-wall",
-                             "work_of_adhesion": interaction.work_of_adhesion
-                             if step.adhesive else None,
-                             "range": interaction.range if step.adhesive else None},
+             # the law applied to this step, as petgap-post rebuilds it
+             "interaction": law.attributes(),
              "contact_modulus": scene.material.contact_modulus,
              # the h0' of the solve's scales and of the analysis (finite differences inside
              # the map on a free boundary; see petgap.mechanics.problem.ContactProblem)

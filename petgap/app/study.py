@@ -67,6 +67,7 @@ from petgap.app.build import build, load_scene, make_grid, make_surface
 from petgap.app.study_report import StudyError, check_outputs, format_table, write_outputs
 from petgap.io import solver_registry as registry
 from petgap.io.solver_registry import SINGLE_TOLERANCE_FLOOR
+from petgap.mechanics.interactions import law_class
 from petgap.parallel.collective import root_decides
 from petgap.parallel.grid import DecompositionError
 from petgap.parallel.log import get_logger
@@ -306,7 +307,7 @@ def quantities_of(scene):
     protocol = control.reference == "non-adhesive"
     names = ["c", "d_rep", "mean_pressure" if control.kind == "mean-gap" else "mean_gap",
              "exponent", "prefactor"]
-    if scene.interaction.kind == "exponential" or protocol:
+    if law_class(scene.interaction.kind).adhesive or protocol:
         names.append("F_att")
     return names
 
@@ -391,7 +392,7 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
     modulus = scene.material.contact_modulus
     interaction = scene.interaction
     protocol = scene.control.reference == "non-adhesive"
-    adhesive = interaction.kind == "exponential"
+    adhesive = law_class(interaction.kind).adhesive
     first = dataclasses.replace(scene, control=dataclasses.replace(
         scene.control, values=tuple(scene.control.values[:1])))
     row = {"ladder": rung.ladder, "rung": rung.label, "value": rung.value, "nx": rung.nx,

@@ -652,20 +652,38 @@ class MaterialSection:
                                  "in the pressure unit of the run")
 
 
+#: The adhesive laws of ``[interaction] kind``, each with what its ``range`` means.  The
+#: laws themselves, and the registry mapping these names to them, are in
+#: :mod:`petgap.mechanics.interactions` (which this schema cannot import: the scene
+#: ranks below the mechanics; ``tests/mechanics/test_interactions.py`` keeps the two
+#: lists equal).
+ADHESIVE_LAWS = {
+    "exponential": "v(g) = -w exp(-g / rho), range = rho (the paper's Eq. 6)",
+    "maugis-dugdale": "v(g) = -w (1 - g / delta) for g < delta and 0 beyond (a constant "
+                      "attraction w / delta), range = delta",
+    "lennard-jones-9-3": "v(g) = (w / 2) ((z0 / (z0 + g))^9 - 3 (z0 / (z0 + g))^3), the 9-3 "
+                         "potential with the wall at its minimum, range = z0",
+    "squared-exponential": "v(g) = -w exp(-g^2 / (2 rho^2)), range = rho",
+}
+
+
 @dataclass(frozen=True)
 class InteractionSection:
-    """The surface interaction: hard-wall repulsion, plus exponential attraction if asked."""
-    kind: str = key(Choice("hard-wall", "exponential"), "hard-wall",
-                    "hard-wall: g >= 0 only; exponential: also v(g) = -w exp(-g / rho)")
+    """The surface interaction: hard-wall repulsion, plus an adhesive law if asked."""
+    kind: str = key(Choice("hard-wall", *ADHESIVE_LAWS), "hard-wall",
+                    "hard-wall: g >= 0 only; the others add an attraction v(g): " +
+                    "; ".join(f"{name}: {law}" for name, law in ADHESIVE_LAWS.items()))
     work_of_adhesion: float = key(Float(minimum=0, min_open=True), REQUIRED,
-                                  "w, energy per area (pressure x length)",
-                                  when=("kind", ["exponential"]))
+                                  "w, energy per area (pressure x length): -v(0), the energy "
+                                  "per area it takes to separate the surfaces from contact",
+                                  when=("kind", list(ADHESIVE_LAWS)))
     range: float = key(Length(minimum=0, min_open=True), REQUIRED,
-                       "rho, the decay length of the attraction",
-                       when=("kind", ["exponential"]))
+                       "the length scale of the attraction (rho, delta or z0; see kind)",
+                       when=("kind", list(ADHESIVE_LAWS)))
     resolution_check: str = key(Choice("warn", "error", "off"), "warn",
-                                "what to do when rho is not resolved by the grid",
-                                when=("kind", ["exponential"]))
+                                "what to do when the grid does not resolve the range or the "
+                                "process zone of the attraction",
+                                when=("kind", list(ADHESIVE_LAWS)))
 
 
 class _ControlValues(Numbers):
@@ -710,7 +728,7 @@ class ControlSection:
     reference: str = key(Choice("non-adhesive"), None,
                          "non-adhesive: the paper's protocol; values are loads of a non-adhesive "
                          "reference run, and each adhesive step is solved at the mean gap that "
-                         "reference found (needs interaction.kind = \"exponential\")",
+                         "reference found (needs an adhesive interaction.kind)",
                          when=("kind", ["load"]))
 
     @staticmethod
@@ -726,11 +744,12 @@ class ControlSection:
                              f"with a hard-wall interaction, where the surfaces only touch",
                              "loads > 0 with the hard wall (a step that carries something)"))
         if values.get("reference") is not None and interaction is not None \
-                and interaction.kind != "exponential":
+                and interaction.kind == "hard-wall":
             problems.append(("reference", values["reference"],
                              f"needs an adhesive interaction, and interaction.kind = "
                              f"{json.dumps(interaction.kind)}",
-                             'reference only with interaction.kind = "exponential"'))
+                             "reference only with an adhesive interaction.kind (" +
+                             ", ".join(json.dumps(k) for k in ADHESIVE_LAWS) + ")"))
 
 
 def _case(ctx, **known):

@@ -111,8 +111,8 @@ class ContactSolution:
     the points at the wall, ``attractive_force = -sum dx dy v'(g)`` over all
     points (the paper's Eq. 15, negative when attractive); their sum is
     ``A0 mean_pressure``.  ``attractive_fraction`` is the area fraction of the
-    points outside repulsive contact within one interaction range
-    (``g <= rho``) -- the bands of width ``d_att`` of the paper's Fig. 1.
+    points outside repulsive contact within one length scale of the interaction
+    law (``g <= rho`` for the exponential) -- the bands of width ``d_att`` of the paper's Fig. 1.
     ``kappa_rep = A_rep h0' E* / F_rep`` and ``inv_kappa_att = -F_att /
     (h0' E* A_rep)``, positive for attraction as in the paper's Fig. 3 (the
     paper's Eq. 16 text writes the ratio without the minus sign).  ``converged`` is False
@@ -189,8 +189,8 @@ class ContactProblem:
         This rank's slab of the rigid surface heights ``h``.
     half_space : petgap.mechanics.half_space.ElasticHalfSpace, optional
         The elastic body; default: one made on ``grid`` with ``contact_modulus``.
-    interaction : HardWall or ExponentialAdhesion, optional
-        Default: hard wall only.
+    interaction : petgap.mechanics.interactions.InteractionLaw, optional
+        A law of :data:`petgap.mechanics.interactions.LAWS`; default: hard wall only.
     contact_modulus : float, optional
         ``E*`` of the half-space made when none is given (default 1); when one
         is given, its modulus must agree.
@@ -357,7 +357,7 @@ class ContactProblem:
                 local[3] += interaction.energy(g).sum()
                 local[4] += (p[c] + stress[c]).sum()       # wall reaction
                 local[5] += stress.sum()
-                local[6] += np.count_nonzero(~repulsive & (g <= interaction.range))
+                local[6] += np.count_nonzero(~repulsive & (g <= interaction.length_scale))
             else:
                 local[4] += p[c].sum(dtype=np.float64)
         total = np.empty_like(local)

@@ -16,21 +16,11 @@ from libc.math cimport fabs, INFINITY
 
 # ---------------------------------------------------------------------------
 # Gap-space preconditioned projected CG (petgap.solvers.gap_cg).  The gradient of the
-# energy per pixel area is ``grad = p_el + v'(g)``; ``vp`` caches ``v'(g)``
-# (computed once per iteration by :func:`gcg_interaction`; for the hard wall
-# ``adh`` is false and ``vp`` is not read).  The free set F is ``g > 0`` or
-# ``grad + lam_f < 0`` (points at the wall that are pulled off it).
-from libc.math cimport exp
-
-
-def gcg_interaction(const double[:, ::1] g, double[:, ::1] vp, double w, double rho):
-    """``vp = (w / rho) exp(-g / rho)``: the one exponential per point per iteration."""
-    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double wr = w / rho
-    with nogil:
-        for i in range(m):
-            for j in range(n):
-                vp[i, j] = wr * exp(-g[i, j] / rho)
+# energy per pixel area is ``grad = p_el + v'(g)``; ``vp`` caches ``v'(g)``, filled
+# once per iteration by the interaction law's own kernel
+# (:mod:`petgap.mechanics.interactions._laws`); for the hard wall ``adh`` is false
+# and ``vp`` is not read.  The free set F is ``g > 0`` or ``grad + lam_f < 0``
+# (points at the wall that are pulled off it).
 
 
 def gcg_open_sums(const double[:, ::1] pel, const double[:, ::1] g,
@@ -121,17 +111,20 @@ def gcg_direction(double[:, ::1] real, const double[:, ::1] pel, const double[:,
 
 
 def gcg_curvature(const double[:, ::1] real, const double[:, ::1] t, const double[:, ::1] pel,
-                  const double[:, ::1] g, const double[:, ::1] vp, bint adh, double lam,
-                  double rho):
+                  const double[:, ::1] g, const double[:, ::1] vp, const double[:, ::1] vpp,
+                  bint adh, double lam, double divisor):
     """Returns ``(t.K t + sum v''(g) t^2, sum (grad + lam) t, max |t|, min over t < 0 of g / -t)``.
 
     ``real`` holds ``K t``, or is None: then the first value leaves ``t.K t`` out
-    (the caller has it by Parseval).  ``v'' = -v' / rho`` for the exponential.
-    The last value is the step at which the first free point would reach the wall.
+    (the caller has it by Parseval).  ``v''`` is ``vpp`` where the law fills that
+    field, otherwise ``-v' / divisor`` (the law's ``curvature_from_stress``: ``rho``
+    for the exponential, ``inf`` for a law with ``v'' = 0``).  The last value is
+    the step at which the first free point would reach the wall.
     """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double tv, e, curv = 0.0, slope = 0.0, tmax = 0.0, reach = INFINITY
     cdef bint image = real is not None
+    cdef bint second = vpp is not None
     with nogil:
         for i in range(m):
             for j in range(n):
@@ -142,7 +135,10 @@ def gcg_curvature(const double[:, ::1] real, const double[:, ::1] t, const doubl
                     curv += tv * real[i, j]
                 if adh:
                     e = vp[i, j]
-                    curv -= (e / rho) * tv * tv
+                    if second:
+                        curv += vpp[i, j] * tv * tv
+                    else:
+                        curv -= (e / divisor) * tv * tv
                     slope += (pel[i, j] + e + lam) * tv
                 else:
                     slope += (pel[i, j] + lam) * tv

@@ -9,9 +9,11 @@ there the compliance ``C`` is a circulant with a positive symbol, so
 the cell's problem with the surface out of reach outside the map:
 
 * Outside the map the cell's topography is ``min(h) - far``, with ``far`` the map's
-  height range plus :data:`REACH` interaction ranges: the gap there stays above
-  ``REACH rho`` (the map's own gaps are smaller, and ``u`` is continuous), where the
-  wall never acts and ``v'(g) = (w / rho) exp(-REACH)`` is nothing.  So at the cell's
+  height range plus :data:`REACH` times the interaction law's length scale (or the
+  rms height, if larger): the gap there stays above that (the map's own gaps are
+  smaller, and ``u`` is continuous), where the wall never acts and ``v'`` is nothing
+  (``exp(-REACH)`` of its largest for the exponential, less for the laws with a
+  cut-off or a Gaussian tail, ``REACH^-4`` for the Lennard-Jones tail).  So at the cell's
   solution the pressure outside the map is zero, and on the map the cell's
   compliance is the linear convolution of the free map (Hockney): the cell's solution
   restricted to the map is the free map's solution.
@@ -41,8 +43,8 @@ from petgap.parallel.collective import move_rows
 from petgap.solvers.convergence import Timer
 from petgap.solvers.tao import solve_as
 
-#: Interaction ranges between the cell's surface outside the map and the map's lowest
-#: point: the gap outside stays above this many ``rho``.
+#: Interaction length scales between the cell's surface outside the map and the map's
+#: lowest point: the gap outside stays above this many of them.
 REACH = 200.0
 
 
@@ -52,8 +54,8 @@ def cell_problem(problem):
     comm = grid.comm
     h = problem.topography
     low = comm.allreduce(float(np.min(h, initial=np.inf)), op=MPI.MIN)
-    rho = problem.interaction.range if problem.interaction.adhesive else 0.0
-    far = problem.top_height - low + REACH * max(rho, problem.gap_scale)
+    reach = max(problem.interaction.length_scale, problem.gap_scale)
+    far = problem.top_height - low + REACH * reach
     heights = np.full(cell.local_shape, low - far)
     _to_cell(grid, cell, h, heights)
     body = PaddedCellHalfSpace(cell, problem.half_space.contact_modulus)
