@@ -73,7 +73,7 @@ and analysed with :mod:`petgap.analysis`; rank 0 writes into ``DIR``:
 The zero-gap tolerance (``--gap-tolerance``, default ``1e-6`` of the mean gap;
 :func:`petgap.analysis.resolve_gap_tolerance`) decides which pixels are at zero
 gap: solvers leave round-off gaps on contact pixels, and with exact zeros
-demanded a Polonsky-Keer 512^2 solution loses a third of its contact area.
+demanded a Polonsky-Keer solution loses a large share of its contact area.
 
 Attributes read from a result file (first found wins; the step group's own
 attributes, then the root's, then the ``topography`` dataset's, then the JSON

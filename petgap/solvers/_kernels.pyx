@@ -5,11 +5,11 @@ Each function makes one pass over this rank's slab and returns the partial
 sums or extrema the caller reduces over MPI.  Arrays are this rank's
 ``(nx_local, ny)`` C-contiguous slabs; ``real`` is the grid's padded FFT buffer
 ``(nx_local, 2 (ny // 2 + 1))`` of which the first ``ny`` columns are used.
-Fusing matters: one NumPy pass over a 2048^2 slab costs about a tenth of an FFT
+Fusing matters: a NumPy pass over a slab costs a sizeable fraction of an FFT
 pair, and an unfused iteration would spend more time in passes than in FFTs.
 
 The pressure-based (Polonsky-Keer) solver keeps its contact set as index
-lists instead; its kernels are in ``petgap/_contact_set.pyx``.
+lists instead; its kernels are in ``petgap/solvers/_contact_set.pyx``.
 """
 from libc.math cimport fabs, INFINITY
 

@@ -451,8 +451,8 @@ def _inner_tolerance(tolerance, error, load, slope, forcing=0.5):
     tolerance h0``; and never above ``tolerance``, which the returned state must
     meet.  Compliant (lightly loaded) contact therefore asks for tighter inner
     solves than stiff contact.  The bound is pessimistic -- a residual bounded
-    in the max norm seldom has that size everywhere at once; measured mean-gap
-    errors were several times smaller -- which leaves margin for the secant.
+    in the max norm seldom has that size everywhere at once -- which leaves
+    margin for the secant.
 
     Parameters
     ----------
