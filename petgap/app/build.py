@@ -300,10 +300,10 @@ def preflight(scene, comm, *, petsc_args=(), strict=False, resolution_check=None
     check_decomposition(comm, scene.grid.nx, scene.grid.ny)
     interaction = scene.interaction
     mode = interaction.resolution_check if resolution_check is None else resolution_check
-    if steps and interaction.kind == "exponential" and mode == "error":
+    law = from_scene(interaction)
+    if steps and law.adhesive and mode == "error":
         g = scene.grid
-        check_resolution(ExponentialAdhesion(interaction.work_of_adhesion, interaction.range),
-                         min(g.size[0] / g.nx, g.size[1] / g.ny),  # as the Grid computes them
+        check_resolution(law, min(g.size[0] / g.nx, g.size[1] / g.ny),  # as the Grid does
                          scene.material.contact_modulus, "error")
     return steps, need
 
