@@ -68,6 +68,14 @@ kernels = Extension(
     define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
 )
 
+# The interaction laws' per-point kernels (petgap.mechanics.interactions).
+laws = Extension(
+    "petgap.mechanics.interactions._laws",
+    sources=["petgap/mechanics/interactions/_laws.pyx"],
+    extra_compile_args=optimise,
+    define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
+)
+
 # Kernels on the contact set stored as index lists (petgap.solvers.pressure_cg).
 contact_set = Extension(
     "petgap.solvers._contact_set",
@@ -78,7 +86,7 @@ contact_set = Extension(
 
 setup(
     packages=find_packages(include=["petgap", "petgap.*"]),
-    ext_modules=cythonize([extension, extension_single, kernels, contact_set],
+    ext_modules=cythonize([extension, extension_single, kernels, laws, contact_set],
                           language_level=3,
                           compiler_directives={"boundscheck": False, "wraparound": False,
                                                "cdivision": True, "initializedcheck": False}),

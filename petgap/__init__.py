@@ -38,7 +38,9 @@ importing only from those before it:
     :class:`Scene` (a run described by a TOML file), :class:`SceneError`.
 ``petgap.mechanics``
     :class:`ElasticHalfSpace` (periodic), :class:`FreeHalfSpace` (no images),
-    :class:`HardWall`, :class:`ExponentialAdhesion`, the controls :class:`Load`,
+    the interaction laws :class:`HardWall`, :class:`ExponentialAdhesion`,
+    :class:`MaugisDugdaleAdhesion`, :class:`LennardJones93Adhesion`,
+    :class:`SquaredExponentialAdhesion`, the controls :class:`Load`,
     :class:`MeanGap` and :class:`Indentation`, :class:`ContactProblem`,
     :class:`ContactSolution`.
 ``petgap.solvers``
@@ -84,7 +86,8 @@ from petgap.app.contact import contact  # noqa: E402  (petgap.app keeps the modu
 from petgap.io import Scene, SceneError  # noqa: E402
 from petgap.mechanics import (  # noqa: E402
     ContactProblem, ContactSolution, ElasticHalfSpace, ExponentialAdhesion, FreeHalfSpace,
-    HardWall, Indentation, Load, MeanGap)
+    HardWall, Indentation, LennardJones93Adhesion, Load, MaugisDugdaleAdhesion, MeanGap,
+    SquaredExponentialAdhesion)
 from petgap.parallel import Grid  # noqa: E402
 from petgap.solvers import solve, sweep  # noqa: E402
 from petgap.surfaces import load_topography, radial_psd, save_topography_npy  # noqa: E402
@@ -103,8 +106,9 @@ __all__ = [
     # io
     "Scene", "SceneError",
     # mechanics
-    "ElasticHalfSpace", "FreeHalfSpace", "HardWall", "ExponentialAdhesion", "Load", "MeanGap",
-    "Indentation",
+    "ElasticHalfSpace", "FreeHalfSpace", "HardWall", "ExponentialAdhesion",
+    "MaugisDugdaleAdhesion", "LennardJones93Adhesion", "SquaredExponentialAdhesion", "Load",
+    "MeanGap", "Indentation",
     "ContactProblem", "ContactSolution",
     # solvers
     "solve", "sweep",

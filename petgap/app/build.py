@@ -27,14 +27,14 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.app import protocol
+from petgap.io import solver_registry as registry
 from petgap.io.scene import Scene, SceneError
 from petgap.mechanics.free_half_space import FreeHalfSpace
 from petgap.mechanics.half_space import ElasticHalfSpace
-from petgap.mechanics.interactions import ExponentialAdhesion, check_resolution
+from petgap.mechanics.interactions import check_resolution, from_scene
 from petgap.mechanics.problem import ContactProblem
-from petgap.parallel.grid import Grid
+from petgap.parallel.grid import Grid, check_decomposition
 from petgap.parallel.log import get_logger, timed
-from petgap.solvers.dispatch import SOLVER_TYPES
 from petgap.solvers.sweeps import SweepStep, sweep
 from petgap.solvers.tao import check_petsc_options
 from petgap.surfaces.indenters import KINDS as INDENTERS, indenter
@@ -143,9 +143,11 @@ def check_options(scene, petsc_args=(), strict=False, log=None):
         errors += [f"PETSc option -{name} {value!r} ({where}): {problem}; allowed: {allowed}"
                    for name, value, problem, allowed in bad]
         tao_type = options.get("tao_type")
-        if tao_type is not None and tao_type not in SOLVER_TYPES + ("python",):
+        refusal = None if tao_type is None else registry.choice_refusal(
+            "tao_type", registry.ALIASES.get(tao_type, tao_type), registry.SOLVER_NAMES)
+        if refusal is not None:
             errors.append(f"PETSc option -tao_type {tao_type!r} ({where}): is not a solver "
-                          f"petgap runs; allowed: {', '.join(SOLVER_TYPES)}")
+                          f"petgap runs; allowed: {', '.join(registry.SOLVER_NAMES)}")
         unknown += [(f"-{name} ({where})", f" (did you mean -{close}?)" if close else "")
                     for name, close in strange]
     if unknown and strict:
@@ -162,21 +164,20 @@ def check_options(scene, petsc_args=(), strict=False, log=None):
             "makes this an error", u, hint)
 
 
-#: Peak bytes per grid point of a run, for the estimate before anything is allocated
-#: (docs/benchmarks.md, "Memory per point"): the pressure solver (hard wall, periodic,
-#: pcg or pcg-pressure) in double or mixed precision, and in single; every other solve
-#: (adhesion, the solvers on the gap); a surface-only run (the FFT buffers and the
-#: topography).  Each is above a measured whole run's peak (double 43-45 bytes per point
-#: on one rank at 4096^2-16384^2 and 54 on two at 2048^2, single 24, adhesion 67 at
-#: 4096^2), with a margin for small grids, whose fixed costs weigh more, and for TAO's
-#: solvers (32 bytes per point more than the pressure solver).
+#: Peak bytes per grid point of a run, for the estimate before anything is allocated:
+#: the pressure solver (the registry's ``pcg-pressure`` on a periodic cell) in double or
+#: mixed precision, and in single; every other solve (adhesion, the solvers on the gap);
+#: a surface-only run (the FFT buffers and the topography).  Each lies above the
+#: measured peak of a whole run (docs/benchmarks.md, "Memory per point"), with a margin
+#: for small grids, whose fixed costs weigh more, and for TAO's solvers, which hold more
+#: fields than the pressure solver.
 BYTES_PER_POINT_PRESSURE = 56
 BYTES_PER_POINT_PRESSURE_SINGLE = 36
 BYTES_PER_POINT_SOLVE = 80
 BYTES_PER_POINT_SURFACE = 40
 #: The same for a free boundary: the hard wall adds the padded cell's FFT buffers and
-#: kernel (181-191 measured, docs/benchmarks.md, "Free boundary beside periodic");
-#: adhesion solves on the cell, four times the map's points.
+#: kernel (docs/benchmarks.md, "Free boundary beside periodic"); adhesion solves on the
+#: cell, four times the map's points.
 BYTES_PER_POINT_FREE = 200
 BYTES_PER_POINT_FREE_ADHESIVE = 4 * BYTES_PER_POINT_SOLVE + BYTES_PER_POINT_FREE
 #: The most points of a rank's (padded) slab: the kernels index it with 32-bit integers.
@@ -218,7 +219,8 @@ def check_size(scene, comm, solve=True):
     A :class:`~petgap.io.scene.SceneError` naming ``grid.nx``/``grid.ny`` if a
     rank's slab exceeds the kernels' 32-bit index range, or if the estimated
     peak memory of a rank (:data:`BYTES_PER_POINT_PRESSURE` or
-    :data:`BYTES_PER_POINT_PRESSURE_SINGLE` for the pressure solver,
+    :data:`BYTES_PER_POINT_PRESSURE_SINGLE` where the registry resolves the
+    scene's solver to the pressure solver (:meth:`~petgap.io.scene.Scene.case`),
     :data:`BYTES_PER_POINT_SOLVE` for other solves, on a free boundary
     :data:`BYTES_PER_POINT_FREE` or :data:`BYTES_PER_POINT_FREE_ADHESIVE`, or
     :data:`BYTES_PER_POINT_SURFACE` per point of its slab) exceeds what it
@@ -239,8 +241,7 @@ def check_size(scene, comm, solve=True):
             f"rank{'s' if size > 1 else ''} is beyond the {MAX_SLAB_POINTS} points petgap's "
             f"kernels can index; allowed: at most {most_rows} rows of {ny} per rank: {fix}")
     per_point = BYTES_PER_POINT_SOLVE if solve else BYTES_PER_POINT_SURFACE
-    if solve and scene.interaction.kind == "hard-wall" and scene.solver.tao_type in \
-            ("pcg", "pcg-pressure") and scene.control.reference != "non-adhesive":
+    if solve and scene.case().kind == "pcg-pressure":
         per_point = (BYTES_PER_POINT_PRESSURE_SINGLE if scene.solver.precision == "single"
                      else BYTES_PER_POINT_PRESSURE)
     if solve and not scene.surface.periodic:
@@ -283,6 +284,30 @@ def _is_number(text):
         return False
 
 
+def preflight(scene, comm, *, petsc_args=(), strict=False, resolution_check=None, log=None):
+    """Every check of a scene that needs neither its grid nor its surface (collective), in
+    the order :func:`build` makes them: the PETSc options (:func:`check_options`), the
+    planned steps, the size and peak memory (:func:`check_size`), the decomposition of the
+    grid over ``comm`` and the adhesive interaction's resolution, where the scene (or
+    ``resolution_check``) makes an unresolved one an error.  ``petgap check`` runs it as
+    ``petgap run`` does.
+
+    Returns ``(steps, bytes)``: the planned steps and the estimated peak memory per rank.
+    """
+    check_options(scene, petsc_args, strict=strict, log=log)
+    steps = protocol.plan(scene)
+    need = check_size(scene, comm, solve=bool(steps))
+    check_decomposition(comm, scene.grid.nx, scene.grid.ny)
+    interaction = scene.interaction
+    mode = interaction.resolution_check if resolution_check is None else resolution_check
+    law = from_scene(interaction)
+    if steps and law.adhesive and mode == "error":
+        g = scene.grid
+        check_resolution(law, min(g.size[0] / g.nx, g.size[1] / g.ny),  # as the Grid does
+                         scene.material.contact_modulus, "error")
+    return steps, need
+
+
 @dataclass
 class Model:
     """What a scene builds to: the same on every rank, fields local.
@@ -298,7 +323,8 @@ class Model:
         The hard-wall problem.
     adhesive_problem : petgap.mechanics.problem.ContactProblem or None
         The problem with the scene's adhesive interaction, if it has one.
-    interaction : petgap.mechanics.interactions.ExponentialAdhesion or None
+    interaction : petgap.mechanics.interactions.AdhesionLaw or None
+        The scene's adhesive law (:func:`petgap.mechanics.interactions.from_scene`).
     resolution : dict or None
         :func:`~petgap.mechanics.interactions.check_resolution`'s report on
         the adhesive interaction.
@@ -392,10 +418,9 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
     Model
     """
     comm = MPI.COMM_WORLD if comm is None else comm
-    check_options(scene, petsc_args, strict=strict, log=log)
-    steps = protocol.plan(scene)
-    check_size(scene, comm, solve=bool(steps))
-    if steps and scene.solver.precision == "single":
+    steps, _ = preflight(scene, comm, petsc_args=petsc_args, strict=strict,
+                         resolution_check=resolution_check, log=log)
+    if steps and registry.grid_precision(scene.solver.precision) == "single":
         # The surface is made in double and rounded: the same surface as a double
         # run's (its random numbers are drawn in double), so that the two compare.
         with _timed(log, "making the surface (in double, then rounded to single)"):
@@ -430,8 +455,8 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
             model.half_space = FreeHalfSpace(grid, modulus)
     model.problem = ContactProblem(grid, topography, model.half_space)
     interaction = scene.interaction
-    if interaction.kind == "exponential":
-        law = ExponentialAdhesion(interaction.work_of_adhesion, interaction.range)
+    law = from_scene(interaction)
+    if law.adhesive:
         mode = interaction.resolution_check if resolution_check is None else resolution_check
         model.resolution = check_resolution(law, min(grid.dx, grid.dy), modulus, mode)
         model.interaction = law

@@ -29,8 +29,10 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.analysis.of_solution import contact_statistics_of
+from petgap.io import solver_registry as registry
 from petgap.mechanics import (ContactProblem, ElasticHalfSpace, ExponentialAdhesion,
                               FreeHalfSpace, HardWall, Load, MeanGap)
+from petgap.mechanics.interactions import LAWS
 from petgap.parallel import Grid
 from petgap.solvers import solve
 
@@ -130,7 +132,8 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
         for the hard wall, any sign with adhesion) or the mean gap (``> 0``).
     contact_modulus : float
         ``E*`` (paper Eq. 4), positive; pressures come out in its unit.
-    interaction : petgap.mechanics.interactions.HardWall or ExponentialAdhesion, optional
+    interaction : an interaction law of :data:`petgap.mechanics.interactions.LAWS`, optional
+        E.g. :class:`~petgap.mechanics.interactions.MaugisDugdaleAdhesion`.
         Default: the hard wall, or, with ``work_of_adhesion`` and
         ``interaction_range``, ``ExponentialAdhesion(work_of_adhesion,
         interaction_range)`` (``v(g) = -w exp(-g / rho)``, paper Eq. 6).
@@ -167,9 +170,11 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
         ``load`` and ``mean_gap``; ``heights`` not a finite 2D array, or
         different between ranks; a non-positive ``pixel_size`` or
         ``contact_modulus``; an incomplete ``work_of_adhesion`` /
-        ``interaction_range`` pair; ``fields`` not one of :data:`FIELDS`.  Also
-        raised by the objects built (a flat surface, a grid that does not split
-        over ``comm``, an unknown ``solver``), on every rank alike.
+        ``interaction_range`` pair; ``fields`` not one of :data:`FIELDS`; what
+        the registry of solvers does not solve (:mod:`petgap.io.solver_registry`: an
+        unknown ``solver``, a tensile load on the hard wall).  Also raised by the
+        objects built (a flat surface, a grid that does not split over ``comm``),
+        on every rank alike.
 
     Examples
     --------
@@ -183,7 +188,7 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
     comm = MPI.COMM_WORLD if comm is None else comm
     heights, (dx, dy), control, contact_modulus, interaction = _agreed(comm, lambda: _check(
         heights, pixel_size, load, mean_gap, contact_modulus, interaction, work_of_adhesion,
-        interaction_range, fields))
+        interaction_range, fields, solver, periodic))
     nx, ny = heights.shape
     grid = Grid((nx, ny), size=(nx * dx, ny * dy), comm=comm, planner=planner)
     body = ElasticHalfSpace(grid, contact_modulus) if periodic else \
@@ -236,16 +241,23 @@ def _agreed(comm, check):
 
 
 def _check(heights, pixel_size, load, mean_gap, contact_modulus, interaction, work, rho,
-           fields):
-    """The checked arguments of :func:`contact`, or a ValueError naming the first bad one."""
+           fields, solver, periodic):
+    """The checked arguments of :func:`contact`, or a ValueError naming the first bad one.
+
+    What the solve combines is the registry's to refuse
+    (:mod:`petgap.io.solver_registry`), before anything is made.
+    """
     heights = _check_heights(heights)
     pixel = _check_pixel_size(pixel_size)
     control = _check_control(load, mean_gap)
     contact_modulus = _positive("contact_modulus", contact_modulus)
     interaction = _check_interaction(interaction, work, rho)
-    if not interaction.adhesive and isinstance(control, Load) and control.mean_pressure < 0:
-        raise ValueError(f"load = {control.mean_pressure!r} is not allowed with the hard wall: "
-                         f"a non-adhesive contact cannot carry tension (need load >= 0)")
+    refusal = registry.refusal(registry.Case(
+        solver=solver, control=control.kind, adhesive=interaction.adhesive,
+        periodic=bool(periodic),
+        loads=(control.mean_pressure,) if isinstance(control, Load) else ()))
+    if refusal is not None:
+        raise ValueError(refusal.message())
     if fields not in FIELDS:
         raise ValueError(f"fields = {fields!r} is not one of {', '.join(map(repr, FIELDS))}")
     return heights, pixel, control, contact_modulus, interaction
@@ -302,9 +314,9 @@ def _check_interaction(interaction, work, rho):
     if work is None and rho is None:
         if interaction is None:
             return HardWall()
-        if not isinstance(interaction, (HardWall, ExponentialAdhesion)):
+        if not isinstance(interaction, tuple(LAWS.values())):
             raise ValueError(f"interaction = {interaction!r} is not allowed: need a HardWall "
-                             f"or an ExponentialAdhesion")
+                             f"or an adhesive law ({', '.join(c.__name__ for c in LAWS.values())})")
         return interaction
     if interaction is not None:
         raise ValueError("give interaction or work_of_adhesion and interaction_range, not both")

@@ -216,7 +216,8 @@ def figure4(path, data=()):
     """Fig. 4: the integrand of Eq. 16 for the paper's ``rho / g0``, and, for each adhesive
     step in ``data`` (``(label, force_by_gap dict)``), the measured share of ``F_att``
     per unit ``ln(g/g0)`` (:func:`petgap.analysis.attractive_force_by_gap`) beside the
-    analytic curve at its own ``rho / g0`` (dotted)."""
+    analytic curve at its own ``rho / g0`` (dotted; the exponential law's only, whose
+    ``rho_over_g0`` is given)."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(5.5, 4.2))
     x = np.geomspace(1e-5, 1e2, 400)
@@ -226,11 +227,12 @@ def figure4(path, data=()):
     for label, found in data:
         r = found["rho_over_g0"]
         keep = np.asarray(found["share"]) > 0
+        at = f", $\\rho/g_0$ = {r:.3g}" if r else ""
         line, = ax.semilogx(np.asarray(found["x"])[keep], np.asarray(found["share"])[keep],
                             "o", ms=3, mfc="none",
-                            label=f"{label}: data, $\\rho/g_0$ = {r:.3g} (contact "
-                                  f"{found['contact_share']:.0%})")
-        ax.semilogx(x, analysis.fig4_integrand(x, r), ":", color=line.get_color(), lw=1)
+                            label=f"{label}: data{at} (contact {found['contact_share']:.0%})")
+        if r:
+            ax.semilogx(x, analysis.fig4_integrand(x, r), ":", color=line.get_color(), lw=1)
     _finish(fig, ax, path, "$g/g_0$", r"$x\,f(x)$: share of $F_{att}$ per unit $\ln(g/g_0)$",
             "Integrand of Eq. 16 (Fig. 4)", fontsize=8)
 

@@ -7,7 +7,9 @@
     PETSc's options database, after the scene's ``solver.petsc_options``
     (:mod:`petgap.app.run`).
 ``petgap check SCENE.toml``
-    Validate a scene and print its resolved values.
+    Make every check ``petgap run`` makes before it solves (the scene, its topography
+    file, its PETSc options, its size, memory and decomposition on the ranks it runs
+    on), and print the resolved values and the estimated peak memory per rank.
 ``petgap schema``
     Print the scene schema as a markdown table.
 ``petgap study SCENE.toml [--output-dir DIR] [--tolerances ...] [--resolutions ...] [--quick]``
@@ -32,7 +34,7 @@ from petsc4py import PETSc
 
 from petgap.app import run, study
 from petgap.app.argtypes import root_parser
-from petgap.app.build import load_scene
+from petgap.app.build import load_scene, preflight
 from petgap.io.scene import describe_schema
 from petgap.parallel.collective import root_decides
 from petgap.parallel.log import configure, report_failure
@@ -44,8 +46,12 @@ EXIT_USAGE = 2
 
 
 def _check(args, comm, petsc_args):
+    """``petgap check``: every check ``petgap run`` makes before it solves, in its order
+    (the scene, :func:`petgap.app.build.preflight`, the topography file), and what the
+    scene resolves to, with the estimated peak memory per rank."""
     scene = load_scene(args.scene, comm)
-    found = root_decides(comm, lambda: check_topography_file(scene)) \
+    steps, need = preflight(scene, comm)
+    found = root_decides(comm, lambda: check_topography_file(scene, solved=bool(steps))) \
         if scene.surface.kind == "file" else None
     if comm.rank == 0:
         for name, section in scene.to_dict().items():
@@ -56,14 +62,26 @@ def _check(args, comm, petsc_args):
             print()
         if found:
             print(f"# topography: {found}")
+        print(f"# memory: about {_in_units(need)} per rank at its peak on {comm.size} "
+              f"rank{'s' if comm.size > 1 else ''} ({len(steps)} step"
+              f"{'' if len(steps) == 1 else 's'} planned)")
         print(f"# {args.scene}: valid", flush=True)
     return 0
 
 
-def check_topography_file(scene):
+def _in_units(nbytes):
+    """``512 KiB``, ``3.1 MiB``, ``2.5 GiB``."""
+    for unit, scale in (("GiB", 2**30), ("MiB", 2**20)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.3g} {unit}"
+    return f"{nbytes / 2**10:.3g} KiB"
+
+
+def check_topography_file(scene, solved=True):
     """Everything ``petgap run`` would refuse about a scene's topography file, checked on
     the calling rank by reading it whole (format, channel, shape, data type, undefined and
-    out-of-range heights, units); a line describing it, or ValueError/FileNotFoundError."""
+    out-of-range heights, units, and a flat map if it is ``solved``); a line describing
+    it, or ValueError/FileNotFoundError."""
     s, g = scene.surface, scene.grid
     unit = None if scene.units.length == "1" else scene.units.length
     m = read_map(s.path, s.dataset, channel=s.channel, unit=unit, detrend=s.detrend,
@@ -75,6 +93,9 @@ def check_topography_file(scene):
     if largest > MAX_HEIGHT:
         raise ValueError(f"topography {s.path} holds heights up to {largest:.3g} in magnitude; "
                          f"at most {MAX_HEIGHT:g} is allowed")
+    if solved and m.heights.size and np.ptp(m.heights) == 0:
+        raise ValueError(f"topography {s.path} is flat (every height is {m.heights.flat[0]:g}): "
+                         f"contact of a flat surface has no rough-contact solution")
     size = "" if m.physical_size is None else \
         f", {m.physical_size[0]:g} x {m.physical_size[1]:g} {m.unit or ''} in the file " \
         f"(the scene: {g.size[0]:g} x {g.size[1]:g})"

@@ -73,7 +73,7 @@ and analysed with :mod:`petgap.analysis`; rank 0 writes into ``DIR``:
 The zero-gap tolerance (``--gap-tolerance``, default ``1e-6`` of the mean gap;
 :func:`petgap.analysis.resolve_gap_tolerance`) decides which pixels are at zero
 gap: solvers leave round-off gaps on contact pixels, and with exact zeros
-demanded a Polonsky-Keer 512^2 solution loses a third of its contact area.
+demanded a Polonsky-Keer solution loses a large share of its contact area.
 
 Attributes read from a result file (first found wins; the step group's own
 attributes, then the root's, then the ``topography`` dataset's, then the JSON
@@ -83,8 +83,13 @@ of the validated scene in the root attribute ``scene_resolved``):
   ``surface.rms_slope``: ``h0'``; if none is there, it is computed spectrally
   from the ``topography`` dataset.
 * ``contact_modulus`` / ``material.contact_modulus``: ``E*``.
-* ``interaction.kind`` (``"hard-wall"`` or ``"exponential"``), and for the
-  latter ``interaction.work_of_adhesion`` and ``interaction.range`` (``w``, ``rho``).
+* ``interaction.kind`` (a name of :data:`petgap.mechanics.interactions.LAWS`:
+  ``"hard-wall"``, ``"exponential"``, ...), and for an adhesive law its
+  parameters, ``interaction.work_of_adhesion`` and ``interaction.range`` (``w``
+  and the law's length); the law is rebuilt from them
+  (:func:`petgap.mechanics.interactions.from_attributes`) and its own ``v'`` gives
+  the attractive force (Eq. 15).  Eq. 16's prediction and Fig. 4's integrand are
+  the paper's, for its exponential law, and are given for that law only.
 * ``pixel_size`` (``[dx, dy]``), else ``grid.a0`` / ``a0`` (square pixels); the
   grid shape is the datasets' shape.
 * optional: ``surface.lambda_min``, ``surface.lambda_max`` (legends);
@@ -123,8 +128,9 @@ from petgap.app.argtypes import positive_float, positive_int, root_parser  # noq
 from petgap.app import overview, report  # noqa: E402
 from petgap.app.figures import fig2_series, fig3_series, figure2, figure3, figure4  # noqa: E402
 from petgap.app.tables import plain, plain_rows, write_csv, write_json  # noqa: E402
-from petgap.io.results import ResultFile, read_attrs, read_field, step_name  # noqa: E402
-from petgap.mechanics.interactions import ExponentialAdhesion  # noqa: E402
+from petgap.io.results import (ResultFile, read_attrs, read_field, step_name,  # noqa: E402
+                                unreadable)
+from petgap.mechanics.interactions import ExponentialAdhesion, LAWS, law_class  # noqa: E402
 from petgap.parallel.collective import root_decides  # noqa: E402
 from petgap.parallel.grid import DecompositionError, Grid  # noqa: E402
 from petgap.parallel.log import configure, report_failure  # noqa: E402
@@ -224,7 +230,11 @@ def _check_result_file(path):
         raise PostError(f"{path}: cannot read: {exc}") from None
     if not ok:
         raise PostError(f"{path}: not an HDF5 file (and so not a petgap result file)")
-    with h5py.File(path, "r") as f:
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise PostError(f"{path}: {unreadable(exc)}") from None
+    with f:
         if "petgap_version" not in f.attrs:
             raise PostError(f"{path}: not a petgap result file (no root attribute "
                             f"'petgap_version')")
@@ -318,15 +328,10 @@ def analyse_step(result, index, args, grids, comm, log, surface=None):
         raise PostError(f"{where}: pixel size {pixel} is not two positive numbers")
     dx, dy = pixel
     modulus, _ = attrs.find(["contact_modulus", "material.contact_modulus"], "contact modulus")
-    kind, _ = attrs.find(["interaction.kind", "interaction"], "interaction kind", kind=str)
-    if kind not in ("hard-wall", "exponential"):
-        raise PostError(f"{where}: interaction.kind = {kind!r} is not known to petgap-post "
-                        f"(hard-wall or exponential)")
-    adhesive = kind == "exponential"
-    w = rho = None
-    if adhesive:
-        w, _ = attrs.find(["interaction.work_of_adhesion", "work_of_adhesion"], "work of adhesion")
-        rho, _ = attrs.find(["interaction.range", "range"], "interaction range")
+    law = _interaction_law(attrs, where)
+    kind, adhesive = law.name, law.adhesive
+    w, rho = (law.work, law.length_scale) if adhesive else (None, None)
+    paper = isinstance(law, ExponentialAdhesion)  # Eq. 16 and Fig. 4 are its closed forms
     lmin, _ = attrs.find(["surface.lambda_min", "lambda_min"], "lambda_min", required=False)
     lmax, _ = attrs.find(["surface.lambda_max", "lambda_max"], "lambda_max", required=False)
 
@@ -428,8 +433,8 @@ def analyse_step(result, index, args, grids, comm, log, surface=None):
     else:
         log.warning("%s: contact fraction %g: no d_rep/g0, so no collapse, fit or c_n", where, c)
     if adhesive:
-        force = analysis.attractive_force_measured(grid, gap, ExponentialAdhesion(w, rho),
-                                                   pressure=pressure, gap_tolerance=tol)
+        force = analysis.attractive_force_measured(grid, gap, law, pressure=pressure,
+                                                   gap_tolerance=tol)
         # with adhesion the wall reaction in contact is p + v'(0): F_rep = F - F_att
         f_rep = stats.repulsive_force - force.contact_force
         scale = stats.contact_area * slope * modulus
@@ -438,12 +443,13 @@ def analyse_step(result, index, args, grids, comm, log, surface=None):
                                                             stats.contact_area),
                    kappa_rep=scale / f_rep if f_rep > 0 else math.nan)
         if usable:
-            by_gap = analysis.attractive_force_by_gap(grid, gap, pressure,
-                                                      ExponentialAdhesion(w, rho), g0,
+            by_gap = analysis.attractive_force_by_gap(grid, gap, pressure, law, g0,
                                                       gap_tolerance=tol)
             force_by_gap = {"x": by_gap.x.tolist(), "share": by_gap.share.tolist(),
                             "contact_share": by_gap.contact_share,
-                            "outside_share": by_gap.outside_share, "rho_over_g0": rho / g0}
+                            "outside_share": by_gap.outside_share,
+                            "rho_over_g0": rho / g0 if paper else None}
+        if usable and paper:
             eq16 = analysis.attractive_force_eq16(w, rho, g0, stats.contact_area)
             row.update(F_att_eq16_printed=eq16.printed, F_att_eq16_exact=eq16.exact,
                        inv_kappa_att_eq16_printed=analysis.inverse_kappa_att(
@@ -467,6 +473,24 @@ def analyse_step(result, index, args, grids, comm, log, surface=None):
     step_maps = overview.StepMaps(maps, c, title) if comm.rank == 0 else None
     return StepResult(row=row, distribution=dist, x=x, y=y, adhesive=adhesive, meta=meta,
                       patches=patches, maps=step_maps)
+
+
+def _interaction_law(attrs, where):
+    """The interaction law a step was solved with, rebuilt from its attributes (registry)."""
+    kind, _ = attrs.find(["interaction.kind", "interaction"], "interaction kind", kind=str)
+    if kind not in LAWS:
+        raise PostError(f"{where}: interaction.kind = {kind!r} is not known to petgap-post "
+                        f"({', '.join(LAWS)})")
+
+    def parameter(key):
+        return attrs.find([f"interaction.{key}", key], f"interaction {key}")[0]
+
+    try:
+        return law_class(kind).from_attributes(parameter)
+    except PostError:
+        raise
+    except ValueError as exc:  # a parameter the law refuses
+        raise PostError(f"{where}: interaction.kind = {kind!r}: {exc}") from None
 
 
 def solve_identity(result, index, attrs, kind, w, rho):

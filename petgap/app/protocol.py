@@ -15,6 +15,7 @@ its chain.
 from dataclasses import dataclass
 from typing import Optional
 
+from petgap.mechanics.interactions import law_class
 from petgap.mechanics.problem import Indentation, Load, MeanGap
 
 
@@ -53,7 +54,7 @@ def plan(scene):
     control = scene.control
     if control.kind == "none":
         return []
-    adhesive = scene.interaction.kind == "exponential"
+    adhesive = law_class(scene.interaction.kind).adhesive
     make = {"load": Load, "mean-gap": MeanGap, "indentation": Indentation}[control.kind]
     values = list(control.values)
     if control.reference == "non-adhesive":

@@ -18,10 +18,11 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.app.build import build, load_scene
-from petgap.io.results import (ResultExistsError, ResultFile, check_free_space,
-                                existing_result, output_path_error)
-from petgap.io.lock import ResultLock
+from petgap.io.results import (OutputPathError, ResultExistsError, ResultFile,
+                                check_free_space, existing_result, output_path_error)
+from petgap.io.lock import ResultLock, lock_path
 from petgap.io.scene import schema_default
+from petgap.mechanics.interactions import HardWall
 from petgap.mechanics.problem import Indentation, Load, MeanGap
 from petgap.parallel.collective import root_decides
 from petgap.solvers.convergence import ResidualTrend
@@ -174,7 +175,8 @@ def _output_state(scene, output, comm, overwrite):
 
     Decided on rank 0, raised on every rank.  A path that can never be a result
     (a directory, a device, an input of the run) is refused, ``overwrite`` or
-    not.  An existing file is, without ``overwrite``: this scene's unfinished
+    not, and so are a lock or unfinished-file path that is a directory and a new
+    result at a symbolic link (which the new file would replace).  An existing file is, without ``overwrite``: this scene's unfinished
     run (continued), this scene's complete result (nothing to do), or refused
     with the reason -- not a readable result, or the result of another scene,
     named by its first differing key.
@@ -182,7 +184,9 @@ def _output_state(scene, output, comm, overwrite):
     def decide():
         exists = Path(output).exists()
         output_path_error(output, overwrite=overwrite or exists, inputs=_inputs(scene))
+        _check_sidecars(output)
         if overwrite or not exists:
+            _refuse_link(output)
             return "new"
         attrs = existing_result(output)
         difference = scene_difference(attrs, scene)
@@ -202,6 +206,28 @@ def _output_state(scene, output, comm, overwrite):
                     f"or pass --overwrite to start again")
         return "complete" if complete else "resume"
     return root_decides(comm, decide)
+
+
+def _check_sidecars(output):
+    """Refuse, naming it, a lock file or unfinished-result path of ``output`` that is a
+    directory or anything else a file cannot replace."""
+    for sidecar, role in ((lock_path(output), f"keeps the lock of {output}"),
+                          (partial_path(output), f"makes {output} before renaming it")):
+        if sidecar.exists() and not sidecar.is_file():
+            kind = "a directory" if sidecar.is_dir() else "not a regular file"
+            raise OutputPathError(f"{sidecar} is {kind}, where petgap {role}; remove or "
+                                  f"rename it, or choose another --output")
+
+
+def _refuse_link(output):
+    """A new result is made beside ``output`` and renamed onto it: a symbolic link there
+    would be replaced by the file, its target left as it was.  Refused, naming both."""
+    if Path(output).is_symlink():
+        target = os.readlink(output)
+        gone = "" if Path(output).exists() else ", which does not exist"
+        raise OutputPathError(f"output path {output} is a symbolic link to {target}{gone}; a "
+                              f"new result would replace the link, not write its target: give "
+                              f"the target itself (or another path) as --output")
 
 
 def file_sha256(path):
@@ -293,13 +319,12 @@ def _run_steps(model, output, log, resume):
 def _write_step(model, output, step, solution):
     """Write one solved step into the result file (collective); returns its summary."""
     scene, grid, comm = model.scene, model.grid, model.grid.comm
-    interaction, stats, fields = scene.interaction, model.statistics, scene.output.fields
+    stats, fields = model.statistics, scene.output.fields
     scalars = solution.scalars()
+    law = model.interaction if step.adhesive else HardWall()
     attrs = {"plan": step.attrs(), "solution": scalars,
-             "interaction": {"kind": "exponential" if step.adhesive else "hard-wall",
-                             "work_of_adhesion": interaction.work_of_adhesion
-                             if step.adhesive else None,
-                             "range": interaction.range if step.adhesive else None},
+             # the law applied to this step, as petgap-post rebuilds it
+             "interaction": law.attributes(),
              "contact_modulus": scene.material.contact_modulus,
              # the h0' of the solve's scales and of the analysis (finite differences inside
              # the map on a free boundary; see petgap.mechanics.problem.ContactProblem)
@@ -426,6 +451,11 @@ def _log_solution(log, step, solution):
     if not solution.converged:
         log.warning("step %d did not converge: %s; stored with converged = False",
                     step.index, solution.reason)
+    if solution.reason == "stalled_round_off":
+        log.warning("step %d: the KKT residual stopped falling at %.2e, above the tolerance, "
+                    "where round-off decides the steps; ask for a tolerance above it, or "
+                    "solver.tao_type = \"pcg\" (single precision: precision = \"mixed\")",
+                    step.index, max(solution.kkt_pressure, solution.kkt_gap))
 
 
 def _log_statistics(log, stats):

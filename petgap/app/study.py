@@ -18,7 +18,7 @@ most accurate rung of each, what every rung costs and how wrong it is:
     says so.
 *precision ladder*
     The scene at its own grid and tolerance in ``solver.precision`` = single
-    (at its tolerance floor, :data:`petgap.io.scene.SINGLE_TOLERANCE_FLOOR`, if
+    (at its tolerance floor, :data:`petgap.io.solver_registry.SINGLE_TOLERANCE_FLOOR`, if
     the scene's is tighter), mixed and double (the reference).  Single and mixed
     solve non-adhesive contact on a periodic cell with the pressure solver; for
     other scenes their rungs are skipped, saying why.
@@ -65,7 +65,9 @@ from petgap import analysis
 from petgap.app.argtypes import number_in, positive_float
 from petgap.app.build import build, load_scene, make_grid, make_surface
 from petgap.app.study_report import StudyError, check_outputs, format_table, write_outputs
-from petgap.io.scene import SINGLE_TOLERANCE_FLOOR, precision_refusal
+from petgap.io import solver_registry as registry
+from petgap.io.solver_registry import SINGLE_TOLERANCE_FLOOR
+from petgap.mechanics.interactions import law_class
 from petgap.parallel.collective import root_decides
 from petgap.parallel.grid import DecompositionError
 from petgap.parallel.log import get_logger
@@ -194,9 +196,13 @@ def precision_ladder(scene):
     solvers other than the pressure solver).
     """
     g, solver = scene.grid, scene.solver
-    # (the paper's protocol has an adhesive interaction: refused with it)
-    refusal = precision_refusal(scene.interaction.kind, solver.tao_type, scene.surface.periodic)
-    why = None if refusal is None else f"solver.precision single or mixed {refusal[0]}"
+    # what the registry says of the scene in mixed precision (single needs the same), the
+    # tolerance left out: single runs at its floor (the paper's protocol has an adhesive
+    # interaction: refused with it)
+    case = dataclasses.replace(scene.case(), precision="mixed", tolerance=None)
+    refused = [r for r in registry.refusals(case) if r.key == "precision"]
+    why = f"solver.precision single or mixed {refused[0].detail(registry.api_name)}" \
+        if refused else None
     rungs = []
     for i, precision in enumerate(PRECISIONS):
         tolerance = solver.tolerance
@@ -301,7 +307,7 @@ def quantities_of(scene):
     protocol = control.reference == "non-adhesive"
     names = ["c", "d_rep", "mean_pressure" if control.kind == "mean-gap" else "mean_gap",
              "exponent", "prefactor"]
-    if scene.interaction.kind == "exponential" or protocol:
+    if law_class(scene.interaction.kind).adhesive or protocol:
         names.append("F_att")
     return names
 
@@ -386,7 +392,7 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
     modulus = scene.material.contact_modulus
     interaction = scene.interaction
     protocol = scene.control.reference == "non-adhesive"
-    adhesive = interaction.kind == "exponential"
+    adhesive = law_class(interaction.kind).adhesive
     first = dataclasses.replace(scene, control=dataclasses.replace(
         scene.control, values=tuple(scene.control.values[:1])))
     row = {"ladder": rung.ladder, "rung": rung.label, "value": rung.value, "nx": rung.nx,
@@ -432,22 +438,7 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
     c, g0 = stats.contact_fraction, stats.g0
     row.update(c=c, d_rep=stats.mean_diameter, g0=g0, mean_gap=geometry.mean_gap,
                mean_pressure=geometry.mean_pressure)
-    fit = {"exponent": math.nan, "prefactor": math.nan, "fit_points": 0,
-           "power_law_x_min": math.nan, "power_law_decades": math.nan}
-    if 0 < c < 1 and math.isfinite(g0) and g0 > 0:
-        lo, hi = fit_range
-        nbins = max(1, int(round(bins_per_decade * math.log10(hi / lo))))
-        edges = g0 * np.geomspace(lo, hi, nbins + 1)
-        common = analysis.gap_distribution(grid, gap, pressure, bins=edges)
-        x, y = analysis.collapse(common, None, c, g0)
-        fixed = analysis.fit_power_law(x, y, x_range=fit_range)
-        full = analysis.gap_distribution(grid, gap, pressure, bins_per_decade=bins_per_decade)
-        extent = analysis.fit_power_law(*analysis.collapse(full, None, c, g0)) \
-            if full.centres.size else None
-        fit.update(exponent=fixed.exponent, prefactor=fixed.prefactor, fit_points=fixed.npoints)
-        if extent is not None:
-            fit.update(power_law_x_min=extent.x_min, power_law_decades=extent.decades)
-    row.update(fit)
+    row.update(_gap_law(grid, gap, pressure, c, g0, fit_range, bins_per_decade))
     if adhesive or protocol:
         force = analysis.attractive_force_measured(grid, force_state.gap, model.interaction,
                                                    pressure=force_state.pressure)
@@ -464,6 +455,31 @@ def measure_rung(rung, source, comm, log, fit_range=DEFAULT_FIT_RANGE,
     del model, grid, hard, solutions, geometry, force_state, gap, pressure
     gc.collect()
     return row
+
+
+def _gap_law(grid, gap, pressure, c, g0, fit_range, bins_per_decade):
+    """The collapsed gap distribution's power law (Eq. 13) of one state, for a table row.
+
+    Fitted on common bins over ``fit_range`` of ``x = g / g0``, so that rungs compare;
+    its extent from all bins.  NaN (and no points) without partial contact.
+    """
+    fit = {"exponent": math.nan, "prefactor": math.nan, "fit_points": 0,
+           "power_law_x_min": math.nan, "power_law_decades": math.nan}
+    if not (0 < c < 1 and math.isfinite(g0) and g0 > 0):
+        return fit
+    lo, hi = fit_range
+    nbins = max(1, int(round(bins_per_decade * math.log10(hi / lo))))
+    edges = g0 * np.geomspace(lo, hi, nbins + 1)
+    common = analysis.gap_distribution(grid, gap, pressure, bins=edges)
+    x, y = analysis.collapse(common, None, c, g0)
+    fixed = analysis.fit_power_law(x, y, x_range=fit_range)
+    full = analysis.gap_distribution(grid, gap, pressure, bins_per_decade=bins_per_decade)
+    extent = analysis.fit_power_law(*analysis.collapse(full, None, c, g0)) \
+        if full.centres.size else None
+    fit.update(exponent=fixed.exponent, prefactor=fixed.prefactor, fit_points=fixed.npoints)
+    if extent is not None:
+        fit.update(power_law_x_min=extent.x_min, power_law_decades=extent.decades)
+    return fit
 
 
 # ====================================================================== a study

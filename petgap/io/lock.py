@@ -61,7 +61,13 @@ class ResultLock:
 
     def _acquire(self):
         while True:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as exc:  # a directory or a device there, a read-only directory
+                what = "a directory" if self.path.is_dir() else exc.strerror
+                raise ResultLockedError(
+                    f"cannot make the lock file {self.path} of {self.output}: {what}; remove "
+                    f"or rename it, or choose another --output") from None
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:

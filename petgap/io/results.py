@@ -35,6 +35,7 @@ import dataclasses
 import datetime
 import errno
 import os
+import re
 import shlex
 import socket
 import subprocess
@@ -664,9 +665,23 @@ def root_attributes(path):
         return dict(f.attrs)
 
 
+def unreadable(exc):
+    """Why HDF5 could not open a file, from its OSError ``exc``: ``"truncated: ..."``
+    with the bytes it has and those its superblock states, or HDF5's own words."""
+    cut = re.search(r"truncated file: eof = (\d+).*stored_eof = (\d+)", str(exc))
+    if cut:
+        return (f"truncated: {cut[1]} bytes of the {cut[2]} its HDF5 superblock states (a "
+                f"copy cut short, a full disk, or a job killed while creating it)")
+    return f"not readable as HDF5 ({exc})"
+
+
 def _check_is_result(path):
     if not path.is_file():
         raise FileNotFoundError(f"result file {path} not found")
-    with h5py.File(path, "r") as f:  # rank 0 alone, serial: a quick look at the root
+    try:
+        f = h5py.File(path, "r")  # rank 0 alone, serial: a quick look at the root
+    except OSError as exc:
+        raise OSError(f"result file {path} is {unreadable(exc)}") from None
+    with f:
         if "petgap_version" not in f.attrs:
             raise ValueError(f"{path} is not a petgap result file (no petgap_version attribute)")

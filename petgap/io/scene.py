@@ -22,10 +22,12 @@ Validation
 Unknown sections and keys are errors (with the nearest known name suggested);
 so are keys that do not apply to the chosen ``kind``.  Every error is a
 :class:`SceneError` whose message names the dotted key (``surface.hurst``), the
-offending value and what is allowed; all errors of a file are reported at
-once.  A scene is parsed on rank 0 only and the result, or the error, is
-broadcast, so that every rank of the communicator returns the same scene or
-raises the same :class:`SceneError` and none is left waiting in a collective.
+offending value and what is allowed, except the errors of a topography file, which
+lead with the file and its reason (it is the file that is wrong, not the key that
+names it); all errors of a file are reported at once.  A scene is parsed on rank 0
+only and the result, or the error, is broadcast, so that every rank of the
+communicator returns the same scene or raises the same :class:`SceneError` and none
+is left waiting in a collective.
 """
 import dataclasses
 import difflib
@@ -37,6 +39,8 @@ import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+from petgap.io import solver_registry as registry
+from petgap.io.solver_registry import SINGLE_TOLERANCE_FLOOR
 from petgap.parallel.collective import root_decides
 
 __all__ = ["SceneError", "Scene", "GridSection", "SurfaceSection", "MaterialSection",
@@ -414,7 +418,7 @@ def _file_grid(ctx):
                 found = read_header(path, surface.get("dataset"), surface.get("channel"),
                                     units.get("length", "1"))
             except Exception as exc:  # the surface section reports the file; no grid from it
-                found = {"error": str(exc)}
+                found = {"error": str(exc), "unreadable": True}
     ctx["_file_grid"] = found
     return found
 
@@ -425,6 +429,8 @@ def _grid_from_file(what):
         if header is None:
             raise _Missing("it is required (unless surface.kind = \"file\", whose file "
                            "gives it)")
+        if "unreadable" in header:
+            raise _Skip  # the file's own error, reported once by the surface section
         if "error" in header:
             raise _Missing(f"the topography file would give it, but: {header['error']}")
         if what == "nx":
@@ -597,6 +603,11 @@ class SurfaceSection:
 
     @staticmethod
     def _check(values, ctx, problems):
+        header = _file_grid(ctx) if values["kind"] == "file" else None
+        if header is not None and "unreadable" in header:
+            problems.append((None, None, header["error"], None))  # it leads with the file
+        if values["kind"] in INDENTERS:
+            _check_radius(values, ctx.get("grid"), problems)
         if values["kind"] != "self-affine":
             return
         grid = ctx.get("grid")
@@ -622,6 +633,17 @@ class SurfaceSection:
                              "neither is given)"))
 
 
+def _check_radius(values, grid, problems):
+    """An indenter's radius must span a pixel.  A smaller one is not resolved: a sphere's
+    cap falls between the pixels (the surface is flat), a flat punch is one pixel, and a
+    paraboloid's or cylinder's slope passes 1 within a pixel of the apex, outside the
+    small-slope half-space, on its way to depths whose squares overflow."""
+    if grid is not None and values["radius"] < min(grid.dx, grid.dy):
+        problems.append(("radius", values["radius"], f"is smaller than a pixel: the "
+                         f"{values['kind']} is not resolved by the grid",
+                         f"radius >= {min(grid.dx, grid.dy):g} (a pixel, min(dx, dy))"))
+
+
 @dataclass(frozen=True)
 class MaterialSection:
     """The elastic half-space."""
@@ -630,20 +652,38 @@ class MaterialSection:
                                  "in the pressure unit of the run")
 
 
+#: The adhesive laws of ``[interaction] kind``, each with what its ``range`` means.  The
+#: laws themselves, and the registry mapping these names to them, are in
+#: :mod:`petgap.mechanics.interactions` (which this schema cannot import: the scene
+#: ranks below the mechanics; ``tests/mechanics/test_interactions.py`` keeps the two
+#: lists equal).
+ADHESIVE_LAWS = {
+    "exponential": "v(g) = -w exp(-g / rho), range = rho (the paper's Eq. 6)",
+    "maugis-dugdale": "v(g) = -w (1 - g / delta) for g < delta and 0 beyond (a constant "
+                      "attraction w / delta), range = delta",
+    "lennard-jones-9-3": "v(g) = (w / 2) ((z0 / (z0 + g))^9 - 3 (z0 / (z0 + g))^3), the 9-3 "
+                         "potential with the wall at its minimum, range = z0",
+    "squared-exponential": "v(g) = -w exp(-g^2 / (2 rho^2)), range = rho",
+}
+
+
 @dataclass(frozen=True)
 class InteractionSection:
-    """The surface interaction: hard-wall repulsion, plus exponential attraction if asked."""
-    kind: str = key(Choice("hard-wall", "exponential"), "hard-wall",
-                    "hard-wall: g >= 0 only; exponential: also v(g) = -w exp(-g / rho)")
+    """The surface interaction: hard-wall repulsion, plus an adhesive law if asked."""
+    kind: str = key(Choice("hard-wall", *ADHESIVE_LAWS), "hard-wall",
+                    "hard-wall: g >= 0 only; the others add an attraction v(g): " +
+                    "; ".join(f"{name}: {law}" for name, law in ADHESIVE_LAWS.items()))
     work_of_adhesion: float = key(Float(minimum=0, min_open=True), REQUIRED,
-                                  "w, energy per area (pressure x length)",
-                                  when=("kind", ["exponential"]))
+                                  "w, energy per area (pressure x length): -v(0), the energy "
+                                  "per area it takes to separate the surfaces from contact",
+                                  when=("kind", list(ADHESIVE_LAWS)))
     range: float = key(Length(minimum=0, min_open=True), REQUIRED,
-                       "rho, the decay length of the attraction",
-                       when=("kind", ["exponential"]))
+                       "the length scale of the attraction (rho, delta or z0; see kind)",
+                       when=("kind", list(ADHESIVE_LAWS)))
     resolution_check: str = key(Choice("warn", "error", "off"), "warn",
-                                "what to do when rho is not resolved by the grid",
-                                when=("kind", ["exponential"]))
+                                "what to do when the grid does not resolve the range or the "
+                                "process zone of the attraction",
+                                when=("kind", list(ADHESIVE_LAWS)))
 
 
 class _ControlValues(Numbers):
@@ -688,61 +728,62 @@ class ControlSection:
     reference: str = key(Choice("non-adhesive"), None,
                          "non-adhesive: the paper's protocol; values are loads of a non-adhesive "
                          "reference run, and each adhesive step is solved at the mean gap that "
-                         "reference found (needs interaction.kind = \"exponential\")",
+                         "reference found (needs an adhesive interaction.kind)",
                          when=("kind", ["load"]))
 
     @staticmethod
     def _check(values, ctx, problems):
-        interaction = ctx.get("interaction")
         vals = values.get("values")
+        case = _case(ctx, control=values["kind"],
+                     loads=vals if values["kind"] == "load" and isinstance(vals, tuple) else ())
+        _refused(case, ("control", "load"), ctx, problems, values=vals)
+        interaction = ctx.get("interaction")
         if values["kind"] == "load" and isinstance(vals, tuple) and interaction is not None \
-                and interaction.kind == "hard-wall" and min(vals) <= 0:
-            problems.append(("values", list(vals), "has a load <= 0 with a hard-wall interaction",
-                             "loads > 0 (a non-adhesive contact cannot carry tension)"))
-        surface = ctx.get("surface")
-        if values["kind"] == "indentation" and surface is not None and surface.periodic:
-            problems.append(("kind", "indentation", "needs a free boundary, and "
-                             "surface.periodic = true (on a periodic cell an approach fixes no "
-                             "load)", 'load or mean-gap, or surface.periodic = false'))
-        if values["kind"] == "indentation" and interaction is not None \
-                and interaction.kind != "hard-wall":
-            problems.append(("kind", "indentation", "is for the hard wall, and interaction.kind "
-                             f"= {json.dumps(interaction.kind)} (adhesion on a free boundary is "
-                             "solved on its padded cell, under load or mean gap)",
-                             'load or mean-gap, or interaction.kind = "hard-wall"'))
+                and interaction.kind == "hard-wall" and 0 in vals:
+            problems.append(("values", list(vals), f"item {vals.index(0)} (0) is a zero load "
+                             f"with a hard-wall interaction, where the surfaces only touch",
+                             "loads > 0 with the hard wall (a step that carries something)"))
         if values.get("reference") is not None and interaction is not None \
-                and interaction.kind != "exponential":
+                and interaction.kind == "hard-wall":
             problems.append(("reference", values["reference"],
                              f"needs an adhesive interaction, and interaction.kind = "
                              f"{json.dumps(interaction.kind)}",
-                             'reference only with interaction.kind = "exponential"'))
+                             "reference only with an adhesive interaction.kind (" +
+                             ", ".join(json.dumps(k) for k in ADHESIVE_LAWS) + ")"))
 
 
-#: Smallest solver tolerance of ``solver.precision = "single"``: at least three
-#: times the rounding of the displacement in 32 bits (a few units in the last
-#: place of ``max|u|``, where the contact points are; up to 7.4e-7 ``h0`` on the
-#: benchmark surface at 8192^2), so that edge points flipping in and out of
-#: contact on that rounding do not decide when a solve ends (docs/accuracy.md,
-#: "Precision").
-SINGLE_TOLERANCE_FLOOR = 3e-6
+def _case(ctx, **known):
+    """What a scene combines, in the registry's words, from the sections built so far."""
+    interaction, surface = ctx.get("interaction"), ctx.get("surface")
+    return registry.Case(adhesive=None if interaction is None else
+                         interaction.kind != "hard-wall",
+                         periodic=None if surface is None else surface.periodic, **known)
 
 
-def precision_refusal(interaction_kind, tao_type, periodic):
-    """Why ``solver.precision`` single or mixed cannot solve such a scene, or None.
+#: The scene's key of each input the registry's rules name.
+_SCENE_KEYS = {"solver": "solver.tao_type", "precision": "solver.precision",
+               "tolerance": "solver.tolerance", "control": "control.kind",
+               "load": "control.values"}
 
-    ``(why, allowed)`` for the first of: an adhesive interaction, a solver other
-    than the pressure solver, a free boundary (None for a section not known).
-    The one rule for the scene check and for the study's precision ladder.
-    """
-    if interaction_kind is not None and interaction_kind != "hard-wall":
-        return (f"is for the non-adhesive pressure solver, and interaction.kind = "
-                f"{json.dumps(interaction_kind)}", '"double" with adhesion')
-    if tao_type not in ("pcg", "pcg-pressure"):
-        return (f"is for the pressure solver, and tao_type = {json.dumps(tao_type)}",
-                '"double", or tao_type = "pcg" or "pcg-pressure"')
-    if periodic is not None and not periodic:
-        return "is for a periodic cell, and surface.periodic = false", '"double" on a free boundary'
-    return None
+
+def _refused(case, keys, ctx, problems, values=None):
+    """Add the registry's refusals of ``case`` that blame ``keys`` to a section's problems."""
+    def name(key, value):
+        if key == "interaction":
+            return f"interaction.kind = {json.dumps(ctx['interaction'].kind)}"
+        if key == "boundary":
+            return f"surface.periodic = {_toml_repr(value)}"
+        return f"{_SCENE_KEYS[key]} = {_toml_repr(value)}"
+
+    for refusal in registry.refusals(case):
+        if refusal.key not in keys:
+            continue
+        key = _SCENE_KEYS[refusal.key].split(".")[1]
+        if refusal.key == "load":  # one of the section's values
+            problems.append((key, list(values), f"item {values.index(refusal.value)} "
+                             f"({refusal.value:g}) {refusal.detail(name)}", refusal.allowed))
+        else:
+            problems.append((key, refusal.value, refusal.detail(name), refusal.allowed))
 
 
 @dataclass(frozen=True)
@@ -753,8 +794,7 @@ class SolverSection:
     leading dash; options given after ``--`` on the command line come later and
     take precedence.
     """
-    tao_type: str = key(Choice("pcg", "pcg-pressure", "pcg-gap", "bncg", "blmvm", "bqnls",
-                               "gpcg"), "pcg",
+    tao_type: str = key(Choice(*registry.SOLVER_NAMES), "pcg",
                         "pcg: petgap's preconditioned projected conjugate gradients (on the "
                         "pressure for non-adhesive load control, on the gap otherwise; "
                         "pcg-pressure / pcg-gap force one); the others are TAO "
@@ -767,35 +807,22 @@ class SolverSection:
     petsc_options: tuple = key(OptionTable(), (), "extra PETSc options database entries")
     planner: str = key(Choice("estimate", "measure", "patient"), "measure",
                        "FFTW planner effort (plans are cached as wisdom on disk)")
-    precision: str = key(Choice("double", "single", "mixed"), "double",
+    precision: str = key(Choice(*registry.PRECISIONS), "double",
                          "floating point of the solve: double; single (fields and transforms "
                          "in 32 bits, sums in 64; half the memory, tolerance at least "
-                         "3e-6); mixed (a single solve refined in double to the tolerance). "
+                         f"{SINGLE_TOLERANCE_FLOOR:g}); mixed (a single solve refined in "
+                         "double to the tolerance). "
                          "single and mixed: non-adhesive, periodic, the pressure solver; "
                          "docs/accuracy.md has the trade")
 
     @staticmethod
     def _check(values, ctx, problems):
         control = ctx.get("control")
-        if control is not None and control.kind == "indentation" and values["tao_type"] not in \
-                ("pcg", "pcg-pressure"):
-            problems.append(("tao_type", values["tao_type"], "does not solve indentation "
-                             "control (the pressure solver does)", '"pcg" or "pcg-pressure"'))
-        precision = values["precision"]
-        if precision == "double":
-            return
-        interaction, surface = ctx.get("interaction"), ctx.get("surface")
-        refusal = precision_refusal(None if interaction is None else interaction.kind,
-                                    values["tao_type"], None if surface is None
-                                    else surface.periodic)
-        if refusal is not None:
-            problems.append(("precision", precision) + refusal)
-        elif precision == "single" and values["tolerance"] < SINGLE_TOLERANCE_FLOOR:
-            problems.append(("tolerance", values["tolerance"],
-                             "is below what single precision resolves (the gap is a "
-                             "difference of heights with 7 significant digits)",
-                             f'>= {SINGLE_TOLERANCE_FLOOR:g} with precision = "single", or '
-                             f'precision = "mixed" to refine in double'))
+        case = _case(ctx, solver=values["tao_type"], precision=values["precision"],
+                     tolerance=values["tolerance"],
+                     control=None if control is None or control.kind == "none"
+                     else control.kind)
+        _refused(case, ("solver", "precision", "tolerance"), ctx, problems)
 
     def petsc_args(self):
         """The options as a command-line style list ``["-name", "value", ...]``."""
@@ -878,7 +905,7 @@ class Scene:
 
         def parse():
             try:
-                text = path.read_text(encoding="utf-8")
+                text = path.read_text(encoding="utf-8-sig")  # a byte-order mark is no error
             except FileNotFoundError:
                 raise SceneError(f"scene file {path} not found") from None
             except (OSError, UnicodeDecodeError) as exc:
@@ -914,6 +941,17 @@ class Scene:
             from mpi4py import MPI
             comm = MPI.COMM_WORLD
         return _build(root_decides(comm, parse))
+
+    def case(self):
+        """What the scene's solves combine, in the words of :mod:`petgap.io.solver_registry`.
+
+        (A scene of the paper's protocol, ``control.reference``, has adhesive steps.)
+        """
+        control = self.control
+        return _case({"interaction": self.interaction, "surface": self.surface},
+                     solver=self.solver.tao_type, precision=self.solver.precision,
+                     tolerance=self.solver.tolerance,
+                     control=None if control.kind == "none" else control.kind)
 
     def to_dict(self):
         """The resolved scene as nested plain data (JSON-serialisable), without the text."""
@@ -1120,10 +1158,11 @@ def _parse_section(name, cls, table, ctx, all_keys, errors):
             invalid.add(k)
 
     if not invalid and len(errors) == n_errors and hasattr(cls, "_check"):
-        problems = []
+        problems = []  # (key, value, problem, allowed); key None: problem is the whole line
         cls._check(values, ctx, problems)
         for k, value, problem, allowed in problems:
-            errors.append(f"{name}.{k} = {_toml_repr(value)}: {problem}; allowed: {allowed}")
+            errors.append(problem if k is None else
+                          f"{name}.{k} = {_toml_repr(value)}: {problem}; allowed: {allowed}")
     ctx.pop("_section", None)
     if invalid or len(errors) != n_errors:
         return None

@@ -13,8 +13,10 @@ Modules
     :class:`FreeHalfSpace`: the same body without periodic images, for a finite
     map or an indenter (Love's pixel influence coefficients, Hockney's zero padding).
 :mod:`.interactions`
-    :class:`HardWall` and :class:`ExponentialAdhesion` (``v(g) = -w exp(-g /
-    rho)``, paper Eq. 6), and whether a grid resolves an interaction
+    The interaction laws, each one object that knows itself, and their registry:
+    :class:`HardWall`, :class:`ExponentialAdhesion` (``v(g) = -w exp(-g / rho)``,
+    paper Eq. 6), :class:`MaugisDugdaleAdhesion`, :class:`LennardJones93Adhesion`,
+    :class:`SquaredExponentialAdhesion`; whether a grid resolves one
     (:func:`resolution_report`, :func:`check_resolution`).
 :mod:`.problem`
     The controls :class:`Load` (mean pressure), :class:`MeanGap` and
@@ -24,12 +26,15 @@ Modules
     scalars and the solver's status).
 """
 from petgap.mechanics.half_space import ElasticHalfSpace
-from petgap.mechanics.interactions import (ExponentialAdhesion, HardWall, ResolutionError,
-                                           ResolutionWarning, check_resolution,
+from petgap.mechanics.interactions import (ExponentialAdhesion, HardWall,
+                                           LennardJones93Adhesion, MaugisDugdaleAdhesion,
+                                           ResolutionError, ResolutionWarning,
+                                           SquaredExponentialAdhesion, check_resolution,
                                            resolution_report)
 from petgap.mechanics.free_half_space import FreeHalfSpace
 from petgap.mechanics.problem import ContactProblem, ContactSolution, Indentation, Load, MeanGap
 
-__all__ = ["ElasticHalfSpace", "FreeHalfSpace", "Indentation", "HardWall", "ExponentialAdhesion", "ResolutionError",
-           "ResolutionWarning", "check_resolution", "resolution_report", "Load", "MeanGap",
+__all__ = ["ElasticHalfSpace", "FreeHalfSpace", "Indentation", "HardWall", "ExponentialAdhesion",
+           "MaugisDugdaleAdhesion", "LennardJones93Adhesion", "SquaredExponentialAdhesion",
+           "ResolutionError", "ResolutionWarning", "check_resolution", "resolution_report", "Load", "MeanGap",
            "ContactProblem", "ContactSolution"]

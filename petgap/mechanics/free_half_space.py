@@ -224,7 +224,7 @@ class PaddedCellHalfSpace:
     pixel-averaged Boussinesq kernel, a positive definite function, checked when built).
     A problem on the cell whose surface lies out of reach outside the map (no pressure
     there at the solution, hence none from the images) is the free map's problem
-    (:func:`petgap.solvers.free_boundary.solve_on_cell`).  The ``q = 0`` mode is
+    (:class:`petgap.solvers.free_boundary.PaddedCell`).  The ``q = 0`` mode is
     dropped, as on any periodic cell: the mean pressure of the cell is the control's.
 
     The interface is :class:`~petgap.mechanics.half_space.ElasticHalfSpace`'s; ``periodic``

@@ -59,6 +59,11 @@ class MeanGap:
     mean_gap: float
     kind = "mean-gap"
 
+    def __post_init__(self):
+        if not self.mean_gap >= 0:
+            raise ValueError(f"mean gap {self.mean_gap} < 0 is impossible with a hard wall "
+                             f"(gap >= 0)")
+
     @property
     def value(self):
         return self.mean_gap
@@ -78,6 +83,10 @@ class Indentation:
 
     depth: float
     kind = "indentation"
+
+    def __post_init__(self):
+        if not self.depth >= 0:
+            raise ValueError(f"indentation depth {self.depth} < 0: the surfaces do not touch")
 
     @property
     def value(self):
@@ -102,8 +111,8 @@ class ContactSolution:
     the points at the wall, ``attractive_force = -sum dx dy v'(g)`` over all
     points (the paper's Eq. 15, negative when attractive); their sum is
     ``A0 mean_pressure``.  ``attractive_fraction`` is the area fraction of the
-    points outside repulsive contact within one interaction range
-    (``g <= rho``) -- the bands of width ``d_att`` of the paper's Fig. 1.
+    points outside repulsive contact within one length scale of the interaction
+    law (``g <= rho`` for the exponential) -- the bands of width ``d_att`` of the paper's Fig. 1.
     ``kappa_rep = A_rep h0' E* / F_rep`` and ``inv_kappa_att = -F_att /
     (h0' E* A_rep)``, positive for attraction as in the paper's Fig. 3 (the
     paper's Eq. 16 text writes the ratio without the minus sign).  ``converged`` is False
@@ -159,6 +168,17 @@ class ContactSolution:
         return out
 
 
+@dataclass(frozen=True)
+class Scales:
+    """What makes a problem's KKT residuals unit-free: the rms height ``h0`` and slope ``h0'``.
+
+    The gap residual is over ``h0``, the pressure residual over ``h0' E*``.
+    """
+
+    rms_height: float
+    rms_slope: float
+
+
 class ContactProblem:
     """Everything a solver needs to know about one contact configuration.
 
@@ -169,15 +189,20 @@ class ContactProblem:
         This rank's slab of the rigid surface heights ``h``.
     half_space : petgap.mechanics.half_space.ElasticHalfSpace, optional
         The elastic body; default: one made on ``grid`` with ``contact_modulus``.
-    interaction : HardWall or ExponentialAdhesion, optional
-        Default: hard wall only.
+    interaction : petgap.mechanics.interactions.InteractionLaw, optional
+        A law of :data:`petgap.mechanics.interactions.LAWS`; default: hard wall only.
     contact_modulus : float, optional
         ``E*`` of the half-space made when none is given (default 1); when one
         is given, its modulus must agree.
+    scales : Scales, optional
+        The KKT scales ``h0`` and ``h0'`` (:attr:`scales`) of the problem this one
+        stands in for, instead of its own topography's: a free map's problem solved on
+        its padded cell (:mod:`petgap.solvers.free_boundary`) judges its residuals as
+        the map's, whose surface the cell's far-away outside would distort.
     """
 
     def __init__(self, grid, topography, half_space=None, interaction=None, *,
-                 contact_modulus=None):
+                 contact_modulus=None, scales=None):
         # checked on every rank together: a slab of the wrong shape raises everywhere
         # kept in its own floating type until made the grid's (no double copy of a
         # single-precision topography)
@@ -200,12 +225,15 @@ class ContactProblem:
         #: The highest point, ``max(h)``: where an indentation is counted from.
         self.top_height = grid.comm.allreduce(float(np.max(self.topography, initial=-np.inf)),
                                               op=MPI.MAX)
-        self.rms_height = stats.rms_height
-        #: ``h0'``: spectral on a periodic cell; on a free boundary by finite differences
-        #: inside the map, since the spectrum of a map whose edges do not match holds the
-        #: seam's cliff (which no free solve sees).
-        self.rms_slope = stats.rms_slope if half_space.periodic else \
-            finite_difference_slopes(grid, self.topography)[1]
+        if scales is not None:
+            self.rms_height, self.rms_slope = scales.rms_height, scales.rms_slope
+        else:
+            self.rms_height = stats.rms_height
+            #: ``h0'``: spectral on a periodic cell; on a free boundary by finite
+            #: differences inside the map, since the spectrum of a map whose edges do not
+            #: match holds the seam's cliff (which no free solve sees).
+            self.rms_slope = stats.rms_slope if half_space.periodic else \
+                finite_difference_slopes(grid, self.topography)[1]
         if not (self.rms_height > 0 and self.rms_slope > 0):
             raise ValueError("the topography is flat: contact of a flat surface has no "
                              "rough-contact solution (rms height and slope are zero)")
@@ -213,7 +241,11 @@ class ContactProblem:
         self.pressure_scale = self.rms_slope * half_space.contact_modulus
         #: Gap scale of the KKT residual, ``h0``.
         self.gap_scale = self.rms_height
-        self._derived = {}
+
+    @property
+    def scales(self):
+        """The KKT scales: ``h0`` (:attr:`gap_scale`) and ``h0'`` (``pressure_scale / E*``)."""
+        return Scales(self.rms_height, self.rms_slope)
 
     @property
     def operator_applications(self):
@@ -227,25 +259,12 @@ class ContactProblem:
         """The same surface and half-space with another interaction (None: the hard wall).
 
         Shares the grid, the topography, the half-space (and so its count of
-        operator applications) and the statistics; nothing derived by
-        :meth:`derived` is shared, since that may depend on the interaction.
+        operator applications) and the statistics; it is another object, so what a
+        solver keeps per problem (which may depend on the interaction) is not shared.
         """
         other = copy.copy(self)
         other.interaction = interaction or HardWall()
-        other._derived = {}
         return other
-
-    def derived(self, key, make):
-        """``make()``, made on the first call with this ``key`` and kept for later ones.
-
-        For what a solver derives from the problem alone and reuses over the
-        steps of a sweep (the coarse problem of
-        :func:`petgap.solvers.coarse.coarse_problem`).  ``make`` must be
-        collective if it is, and every rank must ask for the same keys.
-        """
-        if key not in self._derived:
-            self._derived[key] = make()
-        return self._derived[key]
 
     # ------------------------------------------------------------ operators
     def elastic_pressure(self, gap, out=None):
@@ -338,7 +357,7 @@ class ContactProblem:
                 local[3] += interaction.energy(g).sum()
                 local[4] += (p[c] + stress[c]).sum()       # wall reaction
                 local[5] += stress.sum()
-                local[6] += np.count_nonzero(~repulsive & (g <= interaction.range))
+                local[6] += np.count_nonzero(~repulsive & (g <= interaction.length_scale))
             else:
                 local[4] += p[c].sum(dtype=np.float64)
         total = np.empty_like(local)

@@ -452,20 +452,27 @@ class Grid:
 
     def _check_decomposition(self):
         """Raise the same DecompositionError on every rank if any slab is empty."""
-        sizes = self.comm.allgather(_fftw_mpi.local_size_transposed(self.comm, self.nx, self.ny)[1:])
-        rows = [s[0] for s in sizes]
-        krows = [s[2] for s in sizes]
-        if min(rows) == 0 or min(krows) == 0:
-            raise DecompositionError(
-                f"a {self.nx} x {self.ny} grid cannot be split over {self.comm.size} ranks: "
-                f"FFTW-MPI gives real-space rows {rows} (of nx = {self.nx}) and Fourier rows "
-                f"{krows} (of ny // 2 + 1 = {self.nky}) per rank, and every rank needs at least "
-                f"one of each; use fewer ranks, or a grid with nx >= ranks and ny // 2 + 1 >= ranks "
-                f"that splits into non-empty blocks of ceil(n / ranks) rows")
+        check_decomposition(self.comm, self.nx, self.ny)
 
     def __repr__(self):
         return (f"Grid(shape=({self.nx}, {self.ny}), size=({self.Lx:g}, {self.Ly:g}), "
                 f"ranks={self.comm.size}, rows={self.x_slice.start}:{self.x_slice.stop})")
+
+
+def check_decomposition(comm, nx, ny):
+    """Raise the same DecompositionError on every rank of ``comm`` if FFTW-MPI would give
+    some rank no real-space row or no Fourier row of an ``nx x ny`` grid (collective;
+    nothing is allocated)."""
+    sizes = comm.allgather(_fftw_mpi.local_size_transposed(comm, nx, ny)[1:])
+    rows = [s[0] for s in sizes]
+    krows = [s[2] for s in sizes]
+    if min(rows) == 0 or min(krows) == 0:
+        raise DecompositionError(
+            f"a {nx} x {ny} grid cannot be split over {comm.size} ranks: "
+            f"FFTW-MPI gives real-space rows {rows} (of nx = {nx}) and Fourier rows "
+            f"{krows} (of ny // 2 + 1 = {ny // 2 + 1}) per rank, and every rank needs at least "
+            f"one of each; use fewer ranks, or a grid with nx >= ranks and ny // 2 + 1 >= ranks "
+            f"that splits into non-empty blocks of ceil(n / ranks) rows")
 
 
 def _check_shape(shape):

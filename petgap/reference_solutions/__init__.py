@@ -7,7 +7,7 @@ elastic half-space of contact modulus ``E*`` (paper Eq. 4); contact occurs at
 the maxima of ``h``; pressures are positive in compression; the gap is
 ``g = d + u - h >= 0``.
 
-One module per solution: :mod:`.westergaard`, :mod:`.johnson`, :mod:`.hertz`.
+One module per solution: :mod:`.westergaard`, :mod:`.johnson`, :mod:`.hertz`, :mod:`.maugis`.
 """
 from petgap.reference_solutions.westergaard import (  # noqa: F401
     westergaard_full_contact_pressure,
@@ -31,6 +31,11 @@ from petgap.reference_solutions.johnson import (  # noqa: F401
     johnson_contact_half_width,
     johnson_gap_limit,
     johnson_half_width_at_mean_gap)
+from petgap.reference_solutions.maugis import (  # noqa: F401
+    maugis_parameter,
+    maugis_state,
+    maugis_pull_off,
+    maugis_pull_off_force)
 
 __all__ = ["westergaard_full_contact_pressure", "westergaard_contact_half_width",
            "westergaard_pressure", "westergaard_gap", "westergaard_mean_gap",
@@ -38,4 +43,5 @@ __all__ = ["westergaard_full_contact_pressure", "westergaard_contact_half_width"
            "hertz_contact_radius", "hertz_max_pressure", "hertz_penetration", "hertz_pressure",
            "hertz_gap", "johnson_parameter", "johnson_mean_pressure", "johnson_mean_gap",
            "johnson_load_limits", "johnson_contact_half_width", "johnson_gap_limit",
-           "johnson_half_width_at_mean_gap"]
+           "johnson_half_width_at_mean_gap", "maugis_parameter", "maugis_state",
+           "maugis_pull_off", "maugis_pull_off_force"]

@@ -8,9 +8,16 @@ previous one.  Every solver stops on the same unit-free KKT test.
 Modules
 -------
 :mod:`.dispatch`
-    :func:`solve`, :func:`sweep`, :func:`annotate_step` and the bridge to PETSc
-    TAO (solver types :data:`SOLVER_TYPES`; ``-tao_type`` and the other PETSc
-    options have the last word).
+    :func:`solve`: the edge where a solve's settings are read once
+    (:mod:`.settings`) and the solver the registry of solvers chooses
+    (:mod:`petgap.io.solver_registry`, solver types :data:`SOLVER_TYPES`) is run;
+    ``-tao_type`` and the other PETSc options have the last word.
+:mod:`.sweeps`
+    :func:`sweep` and :func:`annotate_step`.
+:mod:`.tao`
+    The bridge to PETSc TAO, and the outer loops that turn one control into another.
+:mod:`.free_boundary`, :mod:`.mixed_precision`
+    A free map's adhesion on its padded cell; a single solve refined in double.
 :mod:`.pressure_cg`
     Polonsky-Keer conjugate gradients on the pressure, preconditioned by the
     stiffness on the contact set (non-adhesive load control).

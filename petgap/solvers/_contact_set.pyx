@@ -5,7 +5,7 @@ At the contact fractions of rough contact (a few percent), most of what a
 Polonsky-Keer iteration does concerns the contact set ``S`` only: the pressure,
 the conjugate direction and the gap are zero or irrelevant elsewhere.  Storing
 them densely makes each iteration stream half a dozen full slabs through
-memory, which at 1024^2 costs about as much as a third FFT pair and evicts the
+memory, which costs about as much as another FFT pair and evicts the
 FFT buffers from the cache.  Here ``S`` is kept as sorted index lists and the
 quantities on it as compressed vectors, so that an iteration makes a single
 full pass over the slab (:func:`gap_pass`, which only reads) besides the

@@ -5,32 +5,24 @@ Each function makes one pass over this rank's slab and returns the partial
 sums or extrema the caller reduces over MPI.  Arrays are this rank's
 ``(nx_local, ny)`` C-contiguous slabs; ``real`` is the grid's padded FFT buffer
 ``(nx_local, 2 (ny // 2 + 1))`` of which the first ``ny`` columns are used.
-Fusing matters: one NumPy pass over a 2048^2 slab costs about a tenth of an FFT
+Fusing matters: a NumPy pass over a slab costs a sizeable fraction of an FFT
 pair, and an unfused iteration would spend more time in passes than in FFTs.
 
 The pressure-based (Polonsky-Keer) solver keeps its contact set as index
-lists instead; its kernels are in ``petgap/_contact_set.pyx``.
+lists instead; its kernels are in ``petgap/solvers/_contact_set.pyx``.
 """
 from libc.math cimport fabs, INFINITY
+
+import numpy as np
 
 
 # ---------------------------------------------------------------------------
 # Gap-space preconditioned projected CG (petgap.solvers.gap_cg).  The gradient of the
-# energy per pixel area is ``grad = p_el + v'(g)``; ``vp`` caches ``v'(g)``
-# (computed once per iteration by :func:`gcg_interaction`; for the hard wall
-# ``adh`` is false and ``vp`` is not read).  The free set F is ``g > 0`` or
-# ``grad + lam_f < 0`` (points at the wall that are pulled off it).
-from libc.math cimport exp
-
-
-def gcg_interaction(const double[:, ::1] g, double[:, ::1] vp, double w, double rho):
-    """``vp = (w / rho) exp(-g / rho)``: the one exponential per point per iteration."""
-    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double wr = w / rho
-    with nogil:
-        for i in range(m):
-            for j in range(n):
-                vp[i, j] = wr * exp(-g[i, j] / rho)
+# energy per pixel area is ``grad = p_el + v'(g)``; ``vp`` caches ``v'(g)``, filled
+# once per iteration by the interaction law's own kernel
+# (:mod:`petgap.mechanics.interactions._laws`); for the hard wall ``adh`` is false
+# and ``vp`` is not read.  The free set F is ``g > 0`` or ``grad + lam_f < 0``
+# (points at the wall that are pulled off it).
 
 
 def gcg_open_sums(const double[:, ::1] pel, const double[:, ::1] g,
@@ -121,17 +113,20 @@ def gcg_direction(double[:, ::1] real, const double[:, ::1] pel, const double[:,
 
 
 def gcg_curvature(const double[:, ::1] real, const double[:, ::1] t, const double[:, ::1] pel,
-                  const double[:, ::1] g, const double[:, ::1] vp, bint adh, double lam,
-                  double rho):
+                  const double[:, ::1] g, const double[:, ::1] vp, const double[:, ::1] vpp,
+                  bint adh, double lam, double divisor):
     """Returns ``(t.K t + sum v''(g) t^2, sum (grad + lam) t, max |t|, min over t < 0 of g / -t)``.
 
     ``real`` holds ``K t``, or is None: then the first value leaves ``t.K t`` out
-    (the caller has it by Parseval).  ``v'' = -v' / rho`` for the exponential.
-    The last value is the step at which the first free point would reach the wall.
+    (the caller has it by Parseval).  ``v''`` is ``vpp`` where the law fills that
+    field, otherwise ``-v' / divisor`` (the law's ``curvature_from_stress``: ``rho``
+    for the exponential, ``inf`` for a law with ``v'' = 0``).  The last value is
+    the step at which the first free point would reach the wall.
     """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double tv, e, curv = 0.0, slope = 0.0, tmax = 0.0, reach = INFINITY
     cdef bint image = real is not None
+    cdef bint second = vpp is not None
     with nogil:
         for i in range(m):
             for j in range(n):
@@ -142,7 +137,10 @@ def gcg_curvature(const double[:, ::1] real, const double[:, ::1] t, const doubl
                     curv += tv * real[i, j]
                 if adh:
                     e = vp[i, j]
-                    curv -= (e / rho) * tv * tv
+                    if second:
+                        curv += vpp[i, j] * tv * tv
+                    else:
+                        curv -= (e / divisor) * tv * tv
                     slope += (pel[i, j] + e + lam) * tv
                 else:
                     slope += (pel[i, j] + lam) * tv
@@ -229,75 +227,90 @@ def copy_from(double[:, ::1] y, const double[:, ::1] x):
 # The coarse term of the gap preconditioner (petgap.solvers.gap_two_level).  Coarse
 # node ``(I, J)`` sits on fine point ``(I b, J b)``; a fine point gives its bilinear
 # hat weights to the four nodes around it (periodically).  ``x0`` is the global index
-# of this rank's first row; the coarse arrays are whole on every rank.
+# of this rank's first row; the coarse arrays are whole on every rank.  A row is
+# first summed onto the coarse row's nodes (weights ``1 - k / b`` and ``k / b`` at
+# offset ``k`` in a cell), which is then added to the two coarse rows around it.
 
-cdef inline void _hat_add(double[:, ::1] out, Py_ssize_t gi, Py_ssize_t j, Py_ssize_t b,
-                          double v) noexcept nogil:
-    cdef Py_ssize_t ncx = out.shape[0], ncy = out.shape[1]
-    cdef Py_ssize_t I = gi // b, J = j // b
-    cdef Py_ssize_t I1 = I + 1 if I + 1 < ncx else 0
-    cdef Py_ssize_t J1 = J + 1 if J + 1 < ncy else 0
-    cdef double fx = <double>(gi - I * b) / b, fy = <double>(j - J * b) / b
-    out[I, J] += (1.0 - fx) * (1.0 - fy) * v
-    out[I, J1] += (1.0 - fx) * fy * v
-    out[I1, J] += fx * (1.0 - fy) * v
-    out[I1, J1] += fx * fy * v
+cdef inline void _row_to_coarse(const double[::1] row, double[:, ::1] out, Py_ssize_t gi,
+                                Py_ssize_t b, double[::1] acc) noexcept nogil:
+    """``out += hat-weighted sums of one fine row (global index gi)``; ``acc`` is scratch."""
+    cdef Py_ssize_t ncx = out.shape[0], ncy = out.shape[1], J, J1, k, I, I1
+    cdef double lo, hi, v, w, fx
+    for J in range(ncy):
+        acc[J] = 0.0
+    for J in range(ncy):
+        lo = 0.0
+        hi = 0.0
+        for k in range(b):
+            v = row[J * b + k]
+            w = <double>k / b
+            lo += v - w * v
+            hi += w * v
+        J1 = J + 1 if J + 1 < ncy else 0
+        acc[J] += lo
+        acc[J1] += hi
+    I = gi // b
+    I1 = I + 1 if I + 1 < ncx else 0
+    fx = <double>(gi - I * b) / b
+    for J in range(ncy):
+        out[I, J] += (1.0 - fx) * acc[J]
+        out[I1, J] += fx * acc[J]
 
 
 def coarse_restrict(const double[:, ::1] real, Py_ssize_t ny, Py_ssize_t x0, Py_ssize_t b,
                     double[:, ::1] out):
     """``out[I, J] += sum_x hat_IJ(x) real(x)`` over this rank's rows (first ``ny`` columns)."""
-    cdef Py_ssize_t i, j, m = real.shape[0]
-    cdef double v
+    cdef Py_ssize_t i, m = real.shape[0]
+    cdef double[::1] acc = np.zeros(out.shape[1])
     with nogil:
         for i in range(m):
-            for j in range(ny):
-                v = real[i, j]
-                if v != 0.0:
-                    _hat_add(out, x0 + i, j, b, v)
+            _row_to_coarse(real[i, :ny], out, x0 + i, b, acc)
 
 
-def coarse_springs(const double[:, ::1] g, const double[:, ::1] vp, bint adh, double rho,
-                   double edge, Py_ssize_t x0, Py_ssize_t b, double[:, ::1] out):
+def coarse_springs(const double[:, ::1] g, const double[:, ::1] vp, const double[:, ::1] vpp,
+                   bint adh, double divisor, double edge, Py_ssize_t x0, Py_ssize_t b,
+                   double[:, ::1] out):
     """Restrict the springs: ``edge`` per free neighbour along y at a point at the wall,
-    ``v''(g) = -v'(g) / rho`` elsewhere (negative; zero for the hard wall)."""
+    ``v''(g)`` elsewhere (``vpp``, or ``-v' / divisor`` where the law fills no ``v''``
+    field, as in :func:`gcg_curvature`; nothing for the hard wall)."""
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef int free
-    cdef double v
+    cdef bint second = vpp is not None
+    cdef double[::1] row = np.zeros(n)
+    cdef double[::1] acc = np.zeros(out.shape[1])
     with nogil:
         for i in range(m):
             for j in range(n):
                 if g[i, j] <= 0.0:
-                    free = (g[i, j - 1 if j > 0 else n - 1] > 0.0) + \
-                        (g[i, j + 1 if j + 1 < n else 0] > 0.0)
-                    if free == 0:
-                        continue
-                    v = edge * free
+                    row[j] = edge * ((g[i, j - 1 if j > 0 else n - 1] > 0.0) +
+                                     (g[i, j + 1 if j + 1 < n else 0] > 0.0))
                 elif adh:
-                    v = -vp[i, j] / rho
+                    row[j] = vpp[i, j] if second else -vp[i, j] / divisor
                 else:
-                    continue
-                _hat_add(out, x0 + i, j, b, v)
+                    row[j] = 0.0
+            _row_to_coarse(row, out, x0 + i, b, acc)
 
 
 def coarse_subtract(double[:, ::1] real, Py_ssize_t ny, const double[:, ::1] y,
                     Py_ssize_t x0, Py_ssize_t b):
     """``real -= P y`` on the first ``ny`` columns, ``P`` the bilinear prolongation."""
-    cdef Py_ssize_t i, j, m = real.shape[0], ncx = y.shape[0], ncy = y.shape[1]
-    cdef Py_ssize_t gi, I, I1, J, J1
-    cdef double fx, fy
+    cdef Py_ssize_t i, k, J, J1, m = real.shape[0], ncx = y.shape[0], ncy = y.shape[1]
+    cdef Py_ssize_t gi, I, I1
+    cdef double fx, a, d
+    cdef double[::1] c = np.zeros(ncy)
     with nogil:
         for i in range(m):
             gi = x0 + i
             I = gi // b
             I1 = I + 1 if I + 1 < ncx else 0
             fx = <double>(gi - I * b) / b
-            for j in range(ny):
-                J = j // b
+            for J in range(ncy):
+                c[J] = (1.0 - fx) * y[I, J] + fx * y[I1, J]
+            for J in range(ncy):
                 J1 = J + 1 if J + 1 < ncy else 0
-                fy = <double>(j - J * b) / b
-                real[i, j] -= ((1.0 - fx) * ((1.0 - fy) * y[I, J] + fy * y[I, J1])
-                               + fx * ((1.0 - fy) * y[I1, J] + fy * y[I1, J1]))
+                a = c[J]
+                d = c[J1] - a
+                for k in range(b):
+                    real[i, J * b + k] -= a + (<double>k / b) * d
 
 
 def gcg_cross_sums(const double[:, ::1] real, double[:, ::1] r_old, const double[:, ::1] t,

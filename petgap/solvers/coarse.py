@@ -1,18 +1,19 @@
 """The coarse grid of the pressure solver's start: a blurred copy of the problem.
 
 Why: from a uniform pressure, Polonsky-Keer spends its first iterations on a
-contact set of most of the points (about 60 % after the first step on rough
-surfaces, shrinking by some 20 % per iteration), each iteration costing more
-than a late one; and a start nearer the answer built from the geometry alone
-(a rigid approach) proved unstable (see :mod:`petgap.solvers.pressure_cg`).  The
+contact set of most of the points, which shrinks slowly, each iteration
+costing more than a late one; and a start nearer the answer built from the
+geometry alone (a rigid approach) is unstable (see
+:mod:`petgap.solvers.pressure_start`).  The
 answer of the same contact on a grid ``f`` times coarser -- the topography
 averaged over ``f x f`` blocks, the same cell, modulus and control -- is such a
 start, and costs ``1/f^2`` per iteration.  ``f = 2``: a start twice as coarse
 leaves the fine solve fewer contact edges to move than one four times as
-coarse, and the levels below cost a third of the first in all.  Its pressure, repeated over each
-block, starts the fine solve with the set already at the contact fraction of
-the answer, which takes a third or more of the iterations off a cold solve
-(docs/benchmarks.md has the current figures).  The coarse problem is solved
+coarse, and the levels below cost less than the first in all.  Its pressure,
+repeated over each block, starts the fine solve with the set already at the
+contact fraction of the answer, which spares the fine solve its first
+iterations on a set of most of the points (docs/design.md, "The coarse-grid
+start").  The coarse problem is solved
 the same way (:func:`petgap.solvers.pressure_start.coarse_start_pressure` drives it), so
 large grids descend through several levels (1024^2: 512^2, 256^2, ..., 32^2).
 The coarse problem is made for the start and dropped after it (the later
@@ -21,7 +22,7 @@ memory; its transforms are planned with FFTW's "estimate", so that a first
 run of a size does not spend longer planning the levels than solving on them.
 On a periodic cell the coarse levels are single precision whatever the
 fine grid's: a start is solved to :data:`COARSE_TOLERANCE`, far above what
-32 bits resolve (:data:`petgap.io.scene.SINGLE_TOLERANCE_FLOOR`), and in
+32 bits resolve (:data:`petgap.io.solver_registry.SINGLE_TOLERANCE_FLOOR`), and in
 single its transforms move half the bytes.  The fine solve takes the
 prolonged pressure in its own precision.
 

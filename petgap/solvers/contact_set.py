@@ -7,7 +7,7 @@ slab (``idx``) and in the padded FFT buffer (``pidx``); the kernels that work on
 them are in ``petgap/solvers/_contact_set.pyx``.
 
 Why a class around six arrays: memory.  A cold start from a uniform pressure
-puts about 60 % of the points in ``S`` after its first step, and the set then
+puts most of the points in ``S`` after its first step, and the set then
 shrinks to the few percent that carry the load.  The vectors therefore live in
 buffers with spare capacity, updated in place by
 :func:`petgap.solvers._contact_set.merge` (never two copies of the set at once), grown

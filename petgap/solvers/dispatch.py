@@ -1,18 +1,25 @@
-"""Solving a contact problem: the solver types and the choice among them (sweeps: :mod:`petgap.solvers.sweeps`).
+"""Solving a contact problem: the edge where a solve's settings are read and its solver chosen.
 
-Every solve runs as a PETSc TAO solve (:mod:`petgap.solvers.tao`), so the
-PETSc options database (``-tao_type``, ``-tao_monitor``, ``-tao_max_it``,
-``-tao_view``, ``-log_view``...) has the final word, as every PETSc user expects.
+:func:`solve` is the boundary of every solve: it puts the solve's own PETSc options
+in the database for the length of the solve (:class:`petsc_options`), reads the
+settings once (:func:`petgap.solvers.settings.read_settings`: the keywords, then
+``-tao_type`` and ``-petgap_*``), asks the registry of solvers
+(:mod:`petgap.io.solver_registry`) whether the combination is solved and by what, and
+runs it (:func:`run`).  Sweeps: :mod:`petgap.solvers.sweeps`.
+
+Every solve runs as a PETSc TAO solve (:mod:`petgap.solvers.tao`), so the PETSc
+options database (``-tao_type``, ``-tao_monitor``, ``-tao_max_it``, ``-tao_view``,
+``-log_view``...) has the final word, as every PETSc user expects.
 
 Solver types
 ------------
 ``pcg`` (default, a TAO ``python`` type)
     petgap's preconditioned projected conjugate gradients, in the formulation
-    that suits the problem: on the pressure (``pcg-pressure``,
-    :mod:`petgap.solvers.pressure_cg`) for non-adhesive load control, on the gap
-    (``pcg-gap``, :mod:`petgap.solvers.gap_cg`) otherwise.  Adhesive load control is a
-    secant iteration on the mean gap around warm-started mean-gap solves, so
-    that each step reports which branch it landed on.
+    that suits the problem (:func:`petgap.io.solver_registry.resolve`): on the
+    pressure (``pcg-pressure``, :mod:`petgap.solvers.pressure_cg`) for non-adhesive
+    load control, on the gap (``pcg-gap``, :mod:`petgap.solvers.gap_cg`) otherwise.
+    Adhesive load control is a secant iteration on the mean gap around warm-started
+    mean-gap solves, so that each step reports which branch it landed on.
 ``pcg-pressure``, ``pcg-gap``
     Force one formulation.  A cold ``pcg-pressure`` solve starts from the
     solution on a grid twice as coarse where the shape allows
@@ -52,23 +59,24 @@ over ``h0' E*`` and gap violation over ``h0`` below ``tolerance``), never on
 TAO's unit-dependent gradient norms, and reports ``converged=False`` with
 TAO's reason when it stops for any other cause.
 """
-
 from petsc4py import PETSc
 
-from petgap.mechanics.problem import Indentation, Load, MeanGap
-from petgap.solvers.free_boundary import solve_on_cell
+from petgap.io import solver_registry as registry
+from petgap.mechanics.problem import Load
+from petgap.solvers.free_boundary import PaddedCell
 from petgap.solvers.mixed_precision import solve_mixed
-from petgap.solvers.settings import SolverSettings
-from petgap.solvers.contact_limits import full_contact_state, touching_state
+from petgap.solvers.contact_limits import FullContact, touching_state
 from petgap.solvers.indentation import solve_mean_gap_by_indentation
-from petgap.solvers.tao import (PETGAP_TYPES, petsc_options, pressure_solver_options,
-                                solve_load_by_mean_gap, solve_mean_gap_by_multiplier,
-                                tao_solve)
+from petgap.solvers.settings import read_settings
+from petgap.solvers.tao import solve_as
 
-#: Solver types a scene may name.
-SOLVER_TYPES = ("pcg", "pcg-pressure", "pcg-gap", "bncg", "blmvm", "bqnls", "gpcg")
-#: Floating-point modes of a solve (``solver.precision`` of a scene).
-PRECISIONS = ("double", "single", "mixed")
+#: Solver types a scene may name (:data:`petgap.io.solver_registry.SOLVER_NAMES`).
+SOLVER_TYPES = registry.SOLVER_NAMES
+
+#: The free-boundary solver on the padded cell, which keeps each map's cell problem.
+PADDED_CELL = PaddedCell()
+#: The full-contact end of the hard wall's load range, which keeps each problem's load.
+FULL_CONTACT = FullContact()
 
 
 def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=10000,
@@ -78,7 +86,7 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
     Parameters
     ----------
     problem : petgap.mechanics.problem.ContactProblem
-    control : petgap.mechanics.problem.Load or petgap.mechanics.problem.MeanGap
+    control : petgap.mechanics.problem.Load, MeanGap or Indentation
     solver : str
         One of :data:`SOLVER_TYPES`; ``-tao_type`` in the options overrides it.
     tolerance : float
@@ -102,94 +110,81 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
     -------
     petgap.mechanics.problem.ContactSolution
     """
-    if solver not in SOLVER_TYPES:
-        raise ValueError(f"solver {solver!r} is not one of {', '.join(SOLVER_TYPES)}")
-    if not (isinstance(tolerance, float) or isinstance(tolerance, int)) or not 0 < tolerance < 1:
-        raise ValueError(f"tolerance must be in (0, 1), got {tolerance!r}")
+    # The options stay in force through the solve: TAO reads some of them there
+    # (-tao_view, -tao_converged_reason), not in setFromOptions.
     with petsc_options(options):
-        tao_type = PETSc.Options().getString("tao_type", solver)
-    if tao_type == "python":
-        tao_type = "pcg"
-    if tao_type not in SOLVER_TYPES:
-        raise ValueError(f"-tao_type {tao_type} is not supported; use one of {', '.join(SOLVER_TYPES)}")
-    adhesive = problem.interaction.adhesive
-    periodic = problem.half_space.periodic
-    grid_precision = problem.grid.precision
-    precision = grid_precision if precision is None else precision
-    if precision not in PRECISIONS:
-        raise ValueError(f"precision {precision!r} is not one of {', '.join(PRECISIONS)}")
-    if precision != "double":
-        if (precision == "mixed") != (grid_precision == "double"):
-            raise ValueError(f"precision {precision!r} on a {grid_precision}-precision grid: "
-                             f"single solves a problem on a single-precision grid, mixed one "
-                             f"on a double grid")
-        if adhesive or not periodic or tao_type not in ("pcg", "pcg-pressure") \
-                or not isinstance(control, (Load, MeanGap)):
-            raise ValueError(f"precision {precision!r} is for non-adhesive contact on a "
-                             f"periodic cell under load or mean gap, solved by pcg or "
-                             f"pcg-pressure (here: {'adhesive' if adhesive else 'hard wall'}, "
-                             f"{'periodic' if periodic else 'free boundary'}, {tao_type}, "
-                             f"{type(control).__name__}); use double precision")
-        tao_type = "pcg-pressure"
-    if not periodic and (adhesive or tao_type not in ("pcg", "pcg-pressure")):
-        if isinstance(control, Indentation):
-            raise ValueError("indentation control is for the hard wall with pcg or "
-                             "pcg-pressure; adhesion (and the gap solvers) on a free boundary "
-                             "take load or mean-gap control")
-        def on_cell(cell_problem, cell_control, warm):
-            return _solve(cell_problem, cell_control, tao_type, adhesive, tolerance,
-                          max_iterations, warm, options, monitor)
-        return solve_on_cell(problem, control, on_cell, tolerance=tolerance,
-                             max_iterations=max_iterations, initial=initial)
-    if isinstance(control, Indentation) and periodic:
-        raise ValueError("indentation control needs a free boundary (surface.periodic = "
-                         "false): on a periodic cell an approach fixes no load; use load or "
-                         "mean-gap control")
-    if isinstance(control, Load) and not adhesive and control.mean_pressure == 0:
+        settings = read_settings(problem.grid.precision, solver=solver, tolerance=tolerance,
+                                 max_iterations=max_iterations, precision=precision)
+        return run(problem, control, settings, initial=initial, monitor=monitor)
+
+
+def case_of(problem, control, settings):
+    """What ``solve`` combines, in the registry's words (:class:`~petgap.io.solver_registry.Case`)."""
+    return registry.Case(
+        solver=settings.solver, control=control.kind, adhesive=problem.interaction.adhesive,
+        periodic=problem.half_space.periodic, precision=settings.precision,
+        grid=problem.grid.precision,
+        loads=(control.mean_pressure,) if isinstance(control, Load) else ())
+
+
+def run(problem, control, settings, *, initial=None, monitor=None):
+    """Solve ``problem`` under ``control`` with ``settings`` read already (see :func:`solve`).
+
+    Raises ValueError, naming what is refused and what is allowed, for a combination
+    the registry does not solve.  Collective.
+    """
+    case = case_of(problem, control, settings)
+    refusal = registry.refusal(case)
+    if refusal is not None:
+        raise ValueError(refusal.message())
+    kind = case.kind
+    how = registry.method(kind, case.control, case.adhesive, case.periodic)
+    if how == "padded cell":
+        return PADDED_CELL.solve(problem, control, kind, settings, initial=initial,
+                                 monitor=monitor)
+    if isinstance(control, Load) and not case.adhesive and control.mean_pressure == 0:
         return touching_state(problem, control)  # nothing to solve, for any solver
-    if not periodic and isinstance(control, MeanGap):
-        with petsc_options(options):
-            return solve_mean_gap_by_indentation(
-                problem, control, SolverSettings(
-                    tolerance=tolerance, max_iterations=max_iterations,
-                    edge_correction=pressure_solver_options()["edge_correction"]),
-                initial_pressure=None if initial is None else initial.pressure, monitor=monitor)
+    if how == "indentation":
+        return solve_mean_gap_by_indentation(
+            problem, control, settings,
+            initial_pressure=None if initial is None else initial.pressure, monitor=monitor)
     checked = 0
-    if isinstance(control, Load) and not adhesive and periodic:
+    if isinstance(control, Load) and not case.adhesive and case.periodic:
         before = problem.operator_applications
-        full = full_contact_state(problem, control)   # likewise, at the other end
+        full = FULL_CONTACT.state(problem, control)   # likewise, at the other end
         if full is not None:
             full.operator_applications = problem.operator_applications - before
             return full
         checked = problem.operator_applications - before   # the first step of a problem
-    if precision == "mixed":
-        with petsc_options(options):
-            settings = pressure_solver_options()
-        solution = solve_mixed(problem, control, SolverSettings(
-                                   tolerance=tolerance, max_iterations=max_iterations,
-                                   **{"search_precision": "single", **settings}),
-                               monitor=monitor,
+    if settings.precision == "mixed":
+        solution = solve_mixed(problem, control, settings, monitor=monitor,
                                initial_pressure=None if initial is None else initial.pressure)
     else:
-        solution = _solve(problem, control, tao_type, adhesive, tolerance, max_iterations,
-                          initial, options, monitor)
+        solution = solve_as(problem, control, kind, settings, initial, monitor)
     solution.operator_applications += checked
     return solution
 
 
-def _solve(problem, control, tao_type, adhesive, tolerance, max_iterations, initial, options,
-           monitor):
-    if tao_type == "pcg":
-        tao_type = ("pcg-pressure" if isinstance(control, (Load, Indentation)) and not adhesive
-                    else "pcg-gap")
-    if tao_type == "pcg-pressure" and adhesive:
-        raise ValueError("solver 'pcg-pressure' (Polonsky-Keer on the pressure) is for "
-                         "non-adhesive contact; use pcg or pcg-gap for adhesion")
-    if isinstance(control, Load) and adhesive and tao_type == "pcg-gap":
-        return solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial,
-                                       options, monitor)
-    if isinstance(control, MeanGap) and tao_type not in PETGAP_TYPES:
-        return solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance,
-                                            max_iterations, initial, options, monitor)
-    return tao_solve(problem, control, tao_type, tolerance, max_iterations, initial, options,
-                     monitor)
+class petsc_options:
+    """Push PETSc options for the duration of a ``with`` block, then restore them."""
+
+    def __init__(self, options):
+        self.options = {str(k).lstrip("-"): ("" if v is None else str(v))
+                        for k, v in (options or {}).items()}
+        self.saved = {}
+
+    def __enter__(self):
+        db = PETSc.Options()
+        for key, value in self.options.items():
+            self.saved[key] = db.getString(key, None) if db.hasName(key) else None
+            db.setValue(key, value)
+        return db
+
+    def __exit__(self, *exc):
+        db = PETSc.Options()
+        for key, old in self.saved.items():
+            if old is None:
+                db.delValue(key)
+            else:
+                db.setValue(key, old)
+        return False

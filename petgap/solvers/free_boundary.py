@@ -9,9 +9,11 @@ there the compliance ``C`` is a circulant with a positive symbol, so
 the cell's problem with the surface out of reach outside the map:
 
 * Outside the map the cell's topography is ``min(h) - far``, with ``far`` the map's
-  height range plus :data:`REACH` interaction ranges: the gap there stays above
-  ``REACH rho`` (the map's own gaps are smaller, and ``u`` is continuous), where the
-  wall never acts and ``v'(g) = (w / rho) exp(-REACH)`` is nothing.  So at the cell's
+  height range plus :data:`REACH` times the interaction law's length scale (or the
+  rms height, if larger): the gap there stays above that (the map's own gaps are
+  smaller, and ``u`` is continuous), where the wall never acts and ``v'`` is nothing
+  (``exp(-REACH)`` of its largest for the exponential, less for the laws with a
+  cut-off or a Gaussian tail, ``REACH^-4`` for the Lennard-Jones tail).  So at the cell's
   solution the pressure outside the map is zero, and on the map the cell's
   compliance is the linear convolution of the free map (Hockney): the cell's solution
   restricted to the map is the free map's solution.
@@ -19,12 +21,19 @@ the cell's problem with the surface out of reach outside the map:
   ``P0`` is the cell load ``P0 nx ny / (4 nx ny) = P0 / 4``; a mean gap of the map is
   found by secant steps on the cell's mean gap, which differs from it by the gaps
   outside (about ``far`` each, a quarter of the points being inside).
-* The KKT scales and statistics are the map's (those of the problem given).
+* The KKT scales are the map's (:class:`~petgap.mechanics.problem.Scales`): the cell's
+  problem is made with them, so that its residuals mean what they mean for the map.
+
+The solver (:class:`PaddedCell`) keeps the cell's problem of each map's problem while
+that lives: a sweep makes it once.  It solves the cell with the solver type the
+registry chose (:func:`petgap.solvers.tao.solve_as`), as it would a periodic problem.
 
 Cost: the whole solve runs on four times the points (fields and passes, not only the
 transforms as for the hard wall, which :mod:`petgap.solvers.pressure_cg` solves on the
 map with the padded transform alone).
 """
+import weakref
+
 import numpy as np
 from mpi4py import MPI
 
@@ -32,30 +41,25 @@ from petgap.mechanics.free_half_space import PaddedCellHalfSpace
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.collective import move_rows
 from petgap.solvers.convergence import Timer
+from petgap.solvers.tao import solve_as
 
-#: Interaction ranges between the cell's surface outside the map and the map's lowest
-#: point: the gap outside stays above this many ``rho``.
+#: Interaction length scales between the cell's surface outside the map and the map's
+#: lowest point: the gap outside stays above this many of them.
 REACH = 200.0
 
 
 def cell_problem(problem):
-    """The map's problem on its padded cell (made once per problem and kept).  Collective."""
-    def make():
-        grid, cell = problem.grid, problem.half_space.cell
-        comm = grid.comm
-        h = problem.topography
-        low = comm.allreduce(float(np.min(h, initial=np.inf)), op=MPI.MIN)
-        rho = problem.interaction.range if problem.interaction.adhesive else 0.0
-        far = problem.top_height - low + REACH * max(rho, problem.gap_scale)
-        heights = np.full(cell.local_shape, low - far)
-        _to_cell(grid, cell, h, heights)
-        body = PaddedCellHalfSpace(cell, problem.half_space.contact_modulus)
-        on_cell = ContactProblem(cell, heights, body, problem.interaction)
-        # the map's scales: the residuals mean what they mean for the map
-        on_cell.rms_height, on_cell.rms_slope = problem.rms_height, problem.rms_slope
-        on_cell.pressure_scale, on_cell.gap_scale = problem.pressure_scale, problem.gap_scale
-        return on_cell
-    return problem.derived("padded cell problem", make)
+    """The free map ``problem`` on its padded cell, with the map's KKT scales.  Collective."""
+    grid, cell = problem.grid, problem.half_space.cell
+    comm = grid.comm
+    h = problem.topography
+    low = comm.allreduce(float(np.min(h, initial=np.inf)), op=MPI.MIN)
+    reach = max(problem.interaction.length_scale, problem.gap_scale)
+    far = problem.top_height - low + REACH * reach
+    heights = np.full(cell.local_shape, low - far)
+    _to_cell(grid, cell, h, heights)
+    body = PaddedCellHalfSpace(cell, problem.half_space.contact_modulus)
+    return ContactProblem(cell, heights, body, problem.interaction, scales=problem.scales)
 
 
 def _to_cell(grid, cell, field, out):
@@ -76,37 +80,75 @@ def _to_map(grid, cell, field):
     return out
 
 
-def solve_on_cell(problem, control, solve, *, tolerance, max_iterations, initial=None,
-                  max_solves=50):
-    """Solve the free map ``problem`` under ``control`` on its padded cell.
+class PaddedCell:
+    """The free-boundary solver of the solvers on the gap: the map solved on its padded cell.
 
-    ``solve(cell_problem, cell_control, initial)`` solves a periodic problem (the
-    dispatcher's own, with its options, tolerance and monitor).  Returns the map's
-    :class:`~petgap.mechanics.problem.ContactSolution`, with the cell's solution kept as
-    ``solution.cell_solution`` for the next warm start.  Collective.
+    Keeps the cell's problem of every map's problem it has solved while that problem
+    lives (a sweep's steps share it); the key is the problem itself, so that a problem
+    with another interaction (:meth:`~petgap.mechanics.problem.ContactProblem.with_interaction`)
+    gets a cell of its own.
     """
-    timer = Timer()
-    grid = problem.grid
-    on_cell = cell_problem(problem)
-    cell = on_cell.grid
-    start_ops = problem.operator_applications + on_cell.operator_applications
-    warm = getattr(initial, "cell_solution", None)
-    fraction = grid.npoints / cell.npoints
-    if isinstance(control, Load):
-        solution = solve(on_cell, Load(control.mean_pressure * fraction), warm)
-        solves, iterations, history = 1, solution.iterations, list(solution.history)
-        converged, reason = solution.converged, solution.reason
-    elif isinstance(control, MeanGap):
-        # the cell's mean gap less the map's is the outside points' share, estimated as if
-        # u were the same outside as inside (the secant steps correct it)
+
+    def __init__(self, max_solves=50):
+        self.max_solves = max_solves
+        self._cells = weakref.WeakKeyDictionary()
+
+    def cell_problem(self, problem):
+        """The padded cell's problem of ``problem`` (made on the first call).  Collective."""
+        if problem not in self._cells:
+            self._cells[problem] = cell_problem(problem)
+        return self._cells[problem]
+
+    def solve(self, problem, control, kind, settings, *, initial=None, monitor=None):
+        """Solve the free map ``problem`` under ``control`` on its padded cell with ``kind``.
+
+        ``kind`` is the registry's resolved solver type; ``settings`` the solve's.
+        Returns the map's :class:`~petgap.mechanics.problem.ContactSolution`, with the
+        cell's solution kept as ``solution.cell_solution`` for the next warm start.
+        Collective.
+        """
+        timer = Timer()
+        on_cell = self.cell_problem(problem)
+        start_ops = problem.operator_applications + on_cell.operator_applications
+        warm = getattr(initial, "cell_solution", None)
+        if isinstance(control, Load):
+            fraction = problem.grid.npoints / on_cell.grid.npoints
+            solution = solve_as(on_cell, Load(control.mean_pressure * fraction), kind, settings,
+                                warm, monitor)
+            solves, history = 1, list(solution.history)
+            iterations, converged, reason = solution.iterations, solution.converged, \
+                solution.reason
+        elif isinstance(control, MeanGap):
+            solution, solves, iterations, history, converged, reason = self._mean_gap(
+                problem, on_cell, control, kind, settings, warm, monitor)
+        else:
+            raise ValueError(f"control {control!r}: a free boundary with adhesion takes load "
+                             f"or mean-gap control")
+        mapped = self._on_map(problem, on_cell, control, solution, solves, timer,
+                              converged=converged, reason=reason, iterations=iterations,
+                              history=history, start_ops=start_ops)
+        mapped.negative_curvature_steps = solution.negative_curvature_steps
+        mapped.cell_solution = solution
+        return mapped
+
+    def _mean_gap(self, problem, on_cell, control, kind, settings, warm, monitor):
+        """Secant steps on the cell's mean gap until the map's is ``control``'s.
+
+        The cell's mean gap less the map's is the outside points' share, estimated
+        first as if ``u`` were the same outside as inside (the secant steps correct it).
+        Returns the last cell solution, the solves, iterations and history summed, and
+        the verdict.
+        """
+        grid, cell = problem.grid, on_cell.grid
+        fraction = grid.npoints / cell.npoints
         h_out = grid.comm.allreduce(float(np.min(on_cell.topography, initial=np.inf)),
                                     op=MPI.MIN)
         target = control.mean_gap
         guess = target + (1 - fraction) * (problem.mean_height - h_out)
         previous, solves, iterations, history = None, 0, 0, []
         converged, reason = False, "max_solves"
-        while solves < max_solves:
-            solution = solve(on_cell, MeanGap(guess), warm)
+        while solves < self.max_solves:
+            solution = solve_as(on_cell, MeanGap(guess), kind, settings, warm, monitor)
             solves += 1
             iterations += solution.iterations
             history.extend(solution.history)
@@ -115,7 +157,7 @@ def solve_on_cell(problem, control, solve, *, tolerance, max_iterations, initial
             if not solution.converged:
                 reason = solution.reason
                 break
-            if abs(mean - target) <= tolerance * problem.gap_scale:
+            if abs(mean - target) <= settings.tolerance * problem.gap_scale:
                 converged, reason = True, solution.reason
                 break
             slope = 1.0
@@ -125,21 +167,19 @@ def solve_on_cell(problem, control, solve, *, tolerance, max_iterations, initial
             previous = (guess, mean)
             guess += (target - mean) / slope
             warm = solution
-    else:
-        raise ValueError(f"control {control!r}: a free boundary with adhesion takes load or "
-                         f"mean-gap control")
-    gap = _to_map(grid, cell, solution.gap)
-    pressure = _to_map(grid, cell, solution.pressure)
-    contact = gap <= 0
-    start = "; ".join(filter(None, [f"solved on the {cell.nx}x{cell.ny} padded cell"
-                                    + (f" ({solves} mean-gap solves)" if solves > 1 else ""),
-                                    solution.start]))
-    mapped = problem.make_solution(
-        gap, pressure, contact, control, converged=converged, reason=reason,
-        solver=solution.solver, iterations=iterations,
-        operator_applications=problem.operator_applications + on_cell.operator_applications
-        - start_ops, wall_time=timer(), history=history, start=start,
-        start_time=solution.start_time)
-    mapped.negative_curvature_steps = solution.negative_curvature_steps
-    mapped.cell_solution = solution
-    return mapped
+        return solution, solves, iterations, history, converged, reason
+
+    @staticmethod
+    def _on_map(problem, on_cell, control, solution, solves, timer, *, start_ops, **verdict):
+        """The map's solution from the cell's: its rows, judged as the map's."""
+        grid, cell = problem.grid, on_cell.grid
+        gap = _to_map(grid, cell, solution.gap)
+        pressure = _to_map(grid, cell, solution.pressure)
+        start = "; ".join(filter(None, [f"solved on the {cell.nx}x{cell.ny} padded cell"
+                                        + (f" ({solves} mean-gap solves)" if solves > 1 else ""),
+                                        solution.start]))
+        return problem.make_solution(
+            gap, pressure, gap <= 0, control, solver=solution.solver,
+            operator_applications=problem.operator_applications
+            + on_cell.operator_applications - start_ops, wall_time=timer(), start=start,
+            start_time=solution.start_time, **verdict)

@@ -2,88 +2,67 @@
 
 The unknown is the gap ``g >= 0`` itself (the "gap-primal" of Rey, Anciaux &
 Molinari, Comput. Mech. 60 (2017) 69; Bugnicourt, Sainsot, Dureisseix, Gauthier
-& Lubrecht, Tribol. Lett. 66 (2018) 29), so adhesive interactions ``v(g)`` enter
+& Lubrecht, Tribol. Lett. 66 (2018) 29), so an interaction law ``v(g)`` enters
 directly.  The gradient per pixel area is ``grad = p_el + v'(g)`` with
 ``p_el = K (g + h)``; at the solution ``grad + P0 = 0`` where the surfaces are
 apart, ``grad + P0 >= 0`` where they touch.
 
-Algorithm
----------
-Conjugate gradients on the free set ``F`` (points off the wall, and points at
-the wall that are pulled off it), with a projection onto ``g >= 0`` after each
-step and a restart whenever the projection acts or a point is released from
-the wall with a pull of half the residual or more (see below):
+The solver is a small core, :func:`gap_cg` (the iteration and its verdict),
+and named parts, each with its reason in its docstring:
 
-* mean-gap control: directions have zero mean over ``F``; the multiplier
-  ``P0 = -mean_F(grad)`` is estimated every iteration and the projection onto
-  ``{g >= 0, mean(g) = g_bar}`` (``g = max(y + mu, 0)``) is found by a Newton
-  iteration on ``mu`` that converges in a few reductions;
-* load control: ``P0`` is given; the mean mode is free.
+* :func:`_start`: the first gap and its elastic pressure;
+* :func:`_multiplier`: the free set ``F`` (points off the wall, and points at
+  the wall pulled off it), ``P0`` and the residual; with
+  :func:`_released_strongly`, the rule that restarts the recurrence when a
+  point leaves the wall;
+* :func:`_precondition`: ``z = P_F K^{-1} P_F r`` with the mean mode, and with
+  ``two_level`` the coarse term of :mod:`petgap.solvers.gap_two_level`;
+* :func:`_beta`: the recurrence's ``beta``, Polak-Ribiere+ with ``two_level``;
+* :func:`_curvature` and :func:`_step_length`: the step along the direction,
+  its cap at the interaction's length scale and the non-convex case;
+* :func:`_project_mean`: the projection onto ``{g >= 0, mean(g) = g_bar}``;
+* :func:`_advance`: the step, then the projection and a restart, or the
+  recurrence ``p_el += tau K t``.
 
-Preconditioning (petgap's addition): the stiffness ``K`` (symbol
-``E* |q| / 2``) restricted to the free set has a condition number growing like
-``L / a0``; its opposite-order partner, the compliance ``K^{-1}`` restricted to
-the same set, ``z = P_F K^{-1} P_F r``, leaves a condition number that grows
-only like ``log^2(L / a0)`` (operator preconditioning, Steinbach & Wendland,
-Adv. Comput. Math. 9 (1998) 191).  ``K^{-1}`` has no ``q = 0`` mode; under load
-control the preconditioner adds ``c mean_F(r)`` on ``F`` with
-``c = h0 / (h0' E*)``, which makes it positive definite on ``F``; one outlier
-eigenvalue costs about one iteration whatever ``c`` is.
+The interaction law is asked, never read: it fills ``v'`` (and ``v''`` where it
+needs a field of it) by its own kernel, says how the curvature pass gets
+``v''`` otherwise (``curvature_from_stress``), and gives the length scale a step
+is capped at (:mod:`petgap.mechanics.interactions.base`).
 
-Each iteration applies ``K^{-1}`` (preconditioner) and ``K`` (curvature along
-the direction).  The curvature needs ``K t`` only through ``t.K t``, which by
-Parseval the forward half of the transform gives
-(:meth:`petgap.mechanics.half_space.ElasticHalfSpace.begin_in_buffer`); the
-inverse half is run only when the projection does not act and ``p_el`` follows
-by the recurrence ``p_el += tau K t``: two transform pairs then.  Otherwise
-``p_el`` is recomputed (a pair) in place of that half: two and a half.  Step
-lengths are exact minimisers of the local quadratic model; where the adhesive
-curvature makes the model non-convex along the direction, the step is capped at
-``rho`` per point and the method restarts, and such steps are counted and
-reported.  The same cap (and restart) applies to a
-convex adhesive step longer than ``rho`` at some point: the quadratic model of
-``exp(-g / rho)`` holds only over changes of ``g`` small against ``rho``, and an
-almost vanishing curvature ``t.K t + sum v''(g) t^2`` would otherwise send the
-iterate arbitrarily far (seen: a step of 34 rho on a wavy JKR contact that
-raised the energy by 3e3 and never recovered).
+With ``two_level`` the preconditioner also sees the contact patches pinning long
+waves and the interaction softening them (:mod:`petgap.solvers.gap_two_level`),
+and conjugacy is kept across a projection that put at most :data:`KEEP_FRACTION`
+of ``F`` at the wall: the few points that reached the wall perturb the subspace
+the directions were conjugate in, the step's line minimum still holds along the
+new direction, and a restart on every such step would leave the iteration at
+steepest descent's pace while the edges settle one pixel at a time.  The
+preconditioner then changes with the springs and the free set, so ``beta`` is
+Polak-Ribiere+ (zero when the residual turned against the old direction), and a
+kept direction loses its mean over ``F`` (points that left ``F`` took their share
+of it), keeping the mean gap.
 
-Why a released point restarts the recurrence: conjugacy holds on a fixed free
-set (Polonsky & Keer restart theirs when points enter the contact set).
-Points join the wall by the projection, which restarts anyway, but leave it
-only when their wall reaction turns tensile beyond the adhesion -- at an
-adhesive (JKR-like) contact edge, one pixel row at a time, at the tip of its
-crack, when a mean-gap step pulls the surfaces apart.  A released point brings
-a residual the old direction knows nothing of; if the recurrence went on,
-``beta = (r.z)_k / (r.z)_{k-1}`` would stay at or just above 1, the directions
-pile up, the steps shrink, and the edge crawls at about a pixel per seven
-iterations.  So the iteration restarts when a point at the wall is pulled off
-it by at least half the last residual (``grad + P0 < -r / 2`` at ``g = 0``,
-``r`` the last ``max_F |grad + P0|``, ``P0`` estimated over the points off
-the wall): a point that will dominate the new residual.  Weaker releases (the
-edges of rough contacts, a pixel or two per step) are left to the recurrence:
-restarting on every change of ``F`` costs rough surfaces iterations, and lets
-round-off decide the path of a sticky solve differently on 1 and 2 ranks
-(``test_two_ranks_equal_one_with_adhesion``).  Counting the strong pulls costs
-one more pass over the slab, made only when the recurrence would go on with
-points at the wall in ``F``: a few percent of the iterations on rough
-surfaces, more on Johnson's wave.
-Mean-gap control only: load control, which :func:`petgap.solvers.dispatch.solve` gives
-this solver for the hard wall alone, has no count of the points off the wall
-to compare with, and hard-wall edges have no crack tip to crawl.
-
-This is what lets warm-started mean-gap sweeps of Johnson's wave
-(``tests/solvers/test_adhesion.py``) move their edges by tens of pixels per
-step in tens of iterations, and unload past pull-off at all, while sweeps on
-self-affine surfaces take the iterations and end in the states a restart on
-every change of ``F`` would.
+Controls: under mean-gap control directions have zero mean over ``F`` and
+``P0 = -mean_F(grad)`` is estimated every iteration; under load control ``P0``
+is given and the mean mode is free.  Each iteration applies ``K^{-1}`` (the
+preconditioner) and ``K`` (the curvature along the direction): two transform
+pairs when the projection does not act, two and a half when it does.
 
 Convergence: the largest ``|grad + P0|`` over ``F`` relative to ``h0' E*``
-(:meth:`petgap.mechanics.problem.ContactProblem.kkt_residuals`), judged on a freshly
-evaluated ``p_el``.
+(:meth:`petgap.mechanics.problem.ContactProblem.kkt_residuals`), judged on a
+freshly evaluated ``p_el``.
+
+Memory: the fields ``g``, ``p_el``, ``t`` and ``v'`` besides the FFT buffer (and
+the last residual with ``two_level``); a
+law whose ``v''`` is not a multiple of its ``v'`` (Lennard-Jones, the squared
+exponential) adds one field for ``v''``, filled in the same pass as ``v'``, so
+that the curvature pass needs no transcendental function of its own.
 """
+from dataclasses import dataclass
+
 import numpy as np
 from mpi4py import MPI
 
+from petgap.io import solver_registry as registry
 from petgap.mechanics.problem import Load, MeanGap
 from petgap.parallel.collective import global_sums
 from petgap.parallel.log import GAP_CG_EVENT, event
@@ -93,10 +72,90 @@ from petgap.solvers.gap_two_level import CoarseTerm, block_for
 from petgap.solvers.settings import SolverSettings
 
 
+#: With ``two_level``, conjugacy is kept across a projection that put at most this
+#: fraction of the free set at the wall (module docstring); otherwise every
+#: projection restarts the recurrence.
+KEEP_FRACTION = 1.0
+#: With ``two_level``, ``beta`` is Polak-Ribiere+ (module docstring).
+POLAK_RIBIERE = True
+
+
 def _pass(kernel, *args):
     """``kernel(*args)``, timed in the PETSc log event of the gap solver's passes."""
     with event(GAP_CG_EVENT):
         return kernel(*args)
+
+
+class _Fields:
+    """This rank's fields of one solve, and what the parts need of the problem and the law.
+
+    ``vp`` caches ``v'(g)`` once per iteration (the hard wall has none: ``vp`` is
+    then ``pel``, never read); ``vpp`` is ``v''(g)`` for a law that needs the
+    field, else None and the curvature pass takes ``v'' = -v' / divisor``.
+    """
+
+    def __init__(self, problem, load, target, two_level=False):
+        grid = problem.grid
+        law = problem.interaction
+        self.problem, self.grid, self.comm, self.law = problem, grid, grid.comm, law
+        self.h, self.padded, self.half_space = problem.topography, grid.padded, problem.half_space
+        self.load, self.target = load, target
+        self.adhesive = bool(law.adhesive)
+        self.g = np.empty(grid.local_shape)
+        self.pel = np.empty(grid.local_shape)
+        self.t = np.zeros(grid.local_shape)
+        self.vp = np.empty(grid.local_shape) if self.adhesive else self.pel
+        divisor = law.curvature_from_stress if self.adhesive else 1.0
+        self.vpp = np.empty(grid.local_shape) if divisor is None else None
+        self.divisor = 1.0 if divisor is None else divisor  # not read with a v'' field
+        # the step cap and the step along a direction without curvature: an adhesive
+        # law's length scale; the hard wall has no length, and takes one length unit
+        # there (round-off, or a rigid mode under load control)
+        self.cap = law.length_scale if self.adhesive else 1.0
+        # points whose v' jumped (a law with jumps counts them; see _multiplier)
+        self.jumps, self.crossed = bool(law.jumps), 0
+        # the mean mode's compliance under load control (_precondition); with the coarse
+        # term the springs set its stiffness, and it need only exceed every wave's
+        block = block_for(grid.shape) if two_level else 0
+        modulus = self.half_space.contact_modulus
+        self.mean_mode = (max(grid.Lx, grid.Ly) / modulus if block and load
+                          else problem.gap_scale / problem.pressure_scale)
+        self.coarse = (CoarseTerm(grid, modulus, block, self.mean_mode if load else 0.0)
+                       if block else None)
+        self.two_level = bool(two_level)
+        self.keep = KEEP_FRACTION if two_level else 0.0
+        self.r_old = np.zeros(grid.local_shape) if two_level else None  # the last residual
+
+    def fill_stress(self):
+        """``v'`` (and ``v''``) at the current gap, by the law's kernel."""
+        if self.adhesive:
+            self.crossed = _pass(self.law.fill_stress, self.g, self.vp, self.vpp)
+
+    def load_gap(self):
+        """The FFT buffer = ``g + h``, the field ``K`` maps to ``p_el``."""
+        np.add(self.g, self.h, out=self.padded[:, :self.grid.ny])
+
+    def fresh_pressure(self):
+        """``p_el = K (g + h)`` from the FFT buffer (one transform pair)."""
+        self.half_space.apply_in_buffer(inverse=False)
+        _pass(_k.copy_from, self.pel, self.padded)
+
+
+@dataclass
+class _State:
+    """The scalars the iteration carries: multipliers, free-set counts, the recurrence."""
+    lam: float = 0.0          # P0
+    lam_f: float = 0.0        # P0 as estimated over the points off the wall (free-set test)
+    n_open: int = 0
+    n_free: int = 0
+    beta_ok: bool = False     # whether the recurrence may go on (False: steepest descent)
+    rz_old: float = 1.0
+    fresh: bool = True        # p_el freshly evaluated, not by recurrence
+    since_fresh: int = 0
+    negative_curvature: int = 0
+    projected: int = 0        # steps whose projection acted
+    released: int = 0         # restarts on a strong release (_released_strongly)
+    capped: int = 0           # steps capped at the law's length scale
 
 
 def _project_mean(grid, g, target, h, padded, comm):
@@ -108,12 +167,12 @@ def _project_mean(grid, g, target, h, padded, comm):
     a few steps, one reduction each.
 
     Wall points pulled off by their gradient are not lifted here either: lifted
-    by ``mu`` (several ``rho`` for a typical step), a released edge point loads
-    the next one like a crack tip, and re-evaluating the release after each
-    lift opened the whole contact of Johnson's wave, which then lost the
-    contact that unloading must hold at ``1.3 h_a`` (hysteresis).  Points leave
-    the wall through the conjugate gradients' free set instead, whose
-    recurrence restarts when they are pulled off hard (module docstring).
+    by ``mu`` (several interaction lengths for a typical step), a released edge
+    point loads the next one like a crack tip, and re-evaluating the release
+    after each lift opens the whole contact of an adhesive wave, which then
+    loses the contact that unloading must hold (hysteresis).  Points leave the
+    wall through the conjugate gradients' free set instead, whose recurrence
+    restarts when they are pulled off hard (:func:`_released_strongly`).
     """
     n = grid.npoints
     mu = target - grid.mean(g)
@@ -132,12 +191,264 @@ def _project_mean(grid, g, target, h, padded, comm):
     _pass(_k.project_and_load, g, mu, h, padded)
 
 
-#: With the coarse term, conjugacy is kept across a projection that put at most this
-#: fraction of the free set at the wall (module docstring of
-#: :mod:`petgap.solvers.gap_two_level`); without it, every projection restarts.
-KEEP_FRACTION = 1.0
-#: With the coarse term, ``beta`` is Polak-Ribiere+ rather than the ratio of ``r.z``.
-POLAK_RIBIERE = True
+def _start(f, initial_gap):
+    """The first gap (a warm start made feasible, or the surfaces just touching) and ``p_el``.
+
+    Under load control a cold start lifts the surface onto its highest point
+    (no penetration, no contact yet); under mean-gap control the start is
+    projected onto the prescribed mean.
+    """
+    g, h, comm = f.g, f.h, f.comm
+    if initial_gap is not None:
+        g[...] = np.maximum(initial_gap, 0.0)
+    else:
+        g[...] = -h
+    if f.load:
+        if initial_gap is None:
+            top = comm.allreduce(float(h.max()), op=MPI.MAX)
+            g += top
+        np.maximum(g, 0.0, out=g)
+        f.load_gap()
+    else:
+        _project_mean(f.grid, g, f.target, h, f.padded, comm)
+    f.fresh_pressure()
+
+
+def _released_strongly(f, s, history):
+    """Whether points at the wall joined ``F`` pulled off it by half the last residual or more.
+
+    Conjugacy holds on a fixed free set (Polonsky & Keer restart theirs when
+    points enter the contact set).  Points join the wall by the projection,
+    which restarts anyway, but leave it only when their wall reaction turns
+    tensile beyond the adhesion: at an adhesive (JKR-like) contact edge, one
+    pixel row at a time, at the tip of its crack, when a mean-gap step pulls
+    the surfaces apart.  A released point brings a residual the old direction
+    knows nothing of; if the recurrence went on, ``beta`` would stay at or just
+    above 1, the directions pile up, the steps shrink, and the edge crawls a
+    pixel per several iterations.  So the iteration restarts when a point at
+    the wall is pulled off it by at least half the last residual
+    (``grad + P0 < -r / 2`` at ``g = 0``, ``P0`` estimated over the points off
+    the wall): a point that will dominate the new residual.  Weaker releases
+    (the edges of rough contacts, a pixel or two per step) are left to the
+    recurrence: restarting on every change of ``F`` costs rough surfaces
+    iterations, and lets round-off decide the path of a sticky solve
+    differently on different rank counts.  Counting the strong pulls costs one
+    more pass, made only when the recurrence would go on with points at the
+    wall in ``F``.
+
+    Mean-gap control only: load control, which :func:`petgap.solvers.dispatch.solve`
+    gives this solver for the hard wall alone, has no count of the points off
+    the wall to compare with, and hard-wall edges have no crack tip to crawl.
+    """
+    pull = 0.5 * history[-1] * f.problem.pressure_scale
+    strong = _pass(_k.gcg_free_sums, f.pel, f.g, f.vp, f.adhesive, s.lam_f + pull)[1]
+    return f.comm.allreduce(strong, op=MPI.SUM) != s.n_open
+
+
+def _multiplier(f, s, history):
+    """The free set's sums: ``P0`` (mean-gap control), whether to restart, and the residual.
+
+    ``F`` holds the points off the wall and the points at the wall that the
+    gradient pulls off it (``grad + P0_open < 0``, with ``P0_open`` estimated over
+    the points off the wall alone, so that the test does not depend on the
+    points it decides).  Under mean-gap control ``P0 = -mean_F(grad)``, the
+    multiplier of the mean constraint; the residual is ``max_F |grad + P0|``
+    over ``h0' E*``.
+
+    The recurrence restarts when a point crossed a jump of ``v'`` (a law with
+    ``jumps``, e.g. Maugis-Dugdale at ``delta``): its gradient changed by the
+    jump, which the old direction knows nothing of, as for a point released
+    from the wall (:func:`_released_strongly`).  The count rides on the free
+    set's reduction.
+    """
+    comm = f.comm
+    if not f.load:
+        s_open, s.n_open = global_sums(comm, *_pass(_k.gcg_open_sums, f.pel, f.g, f.vp,
+                                                    f.adhesive))
+        s.lam_f = -s_open / s.n_open if s.n_open > 0 else 0.0
+    s_free, n_free, gmax, gmin = _pass(_k.gcg_free_sums, f.pel, f.g, f.vp, f.adhesive, s.lam_f)
+    if f.jumps:
+        s_free, s.n_free, crossed = global_sums(comm, s_free, n_free, f.crossed)
+        s.beta_ok = s.beta_ok and crossed == 0
+    else:
+        s_free, s.n_free = global_sums(comm, s_free, n_free)
+    if s.beta_ok and not f.load and s.n_free > s.n_open:
+        s.beta_ok = not _released_strongly(f, s, history)
+        s.released += not s.beta_ok
+    ext = np.array([gmax, -gmin])
+    comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
+    if not f.load:
+        s.lam = -s_free / s.n_free if s.n_free > 0 else s.lam_f
+    if s.n_free > 0:
+        return max(ext[0] + s.lam, ext[1] - s.lam) / f.problem.pressure_scale
+    return 0.0
+
+
+def _precondition(f, s):
+    """``z = P_F K^{-1} P_F r`` (one transform pair); returns ``(z shift, r.z)``.
+
+    The stiffness ``K`` (symbol ``E* |q| / 2``) restricted to the free set has
+    a condition number growing like ``L / a0``; its opposite-order partner, the
+    compliance ``K^{-1}`` restricted to the same set, leaves one that grows only
+    like ``log^2(L / a0)`` (operator preconditioning, Steinbach & Wendland, Adv.
+    Comput. Math. 9 (1998) 191).  ``K^{-1}`` has no ``q = 0`` mode.  Under load
+    control the preconditioner adds ``c mean_F(r)`` on ``F`` with
+    ``c = h0 / (h0' E*)`` (the problem's gap over pressure scale), which makes it
+    positive definite on ``F``: one outlier eigenvalue, about one iteration
+    whatever ``c`` is.  Under mean-gap control ``z`` is shifted to zero mean over
+    ``F`` instead, keeping the mean gap.  With the coarse term (``two_level``),
+    ``c`` is the compliance of the cell's longest wave and the coarse springs
+    stiffen the mean mode as the contact does (:mod:`petgap.solvers.gap_two_level`).
+    """
+    n = f.grid.npoints
+    _pass(_k.gcg_write_residual, f.pel, f.g, f.vp, f.adhesive, s.lam_f, s.lam, f.padded)
+    if f.coarse is not None:
+        f.coarse.set_springs(f.g, f.vp, f.vpp, f.adhesive, f.divisor)
+        f.coarse.restrict(f.padded)
+    f.half_space.apply_in_buffer(inverse=True)
+    if f.coarse is not None:
+        f.coarse.correct(f.padded)
+    sum_z, rz, sum_r = global_sums(
+        f.comm, *_pass(_k.gcg_precond_sums, f.padded, f.pel, f.g, f.vp, f.adhesive, s.lam_f,
+                       s.lam))
+    if f.load:
+        # z += c mean(r) on F, i.e. a shift of -c sum_r / n
+        return -f.mean_mode * sum_r / n, rz + f.mean_mode * sum_r * sum_r / n
+    return sum_z / s.n_free, rz
+
+
+def _beta(f, s, rz, zshift):
+    """``beta`` of the recurrence and the direction's shift (``z`` in the FFT buffer).
+
+    Without ``two_level``: the ratio of ``r.z``.  With it (module docstring):
+    Polak-Ribiere+, ``max(0, (r.z - r_old.z) / (r.z)_old)`` over ``F``, and under
+    mean-gap control the shift also takes the old direction's mean over ``F`` off.
+    One pass, which also keeps ``r`` for the next iteration.
+    """
+    if f.r_old is None:
+        return (rz / s.rz_old if s.beta_ok else 0.0), zshift
+    cross, sum_old, sum_t = global_sums(f.comm, *_pass(
+        _k.gcg_cross_sums, f.padded, f.r_old, f.t, f.pel, f.g, f.vp, f.adhesive, s.lam_f,
+        s.lam))
+    if not s.beta_ok:
+        beta = 0.0
+    elif POLAK_RIBIERE:
+        beta = max(0.0, (rz - cross + zshift * sum_old) / s.rz_old)
+    else:
+        beta = rz / s.rz_old
+    if not f.load:
+        zshift -= beta * sum_t / s.n_free
+    return beta, zshift
+
+
+def _curvature(f, s):
+    """``(t.K t + sum v''(g) t^2, slope, max |t|)`` along the direction ``t``.
+
+    The curvature needs ``K t`` only through ``t.K t``, which by Parseval the
+    forward half of the transform gives
+    (:meth:`petgap.mechanics.half_space.ElasticHalfSpace.begin_in_buffer`); the
+    inverse half runs later only if ``p_el`` follows by the recurrence (a whole
+    pair where the half-space has no halves).
+    """
+    lam = s.lam if f.load else 0.0
+    if f.half_space.splits_transforms:
+        form = f.half_space.begin_in_buffer(inverse=False)
+        curv, slope, tmax, _ = _pass(_k.gcg_curvature, None, f.t, f.pel, f.g, f.vp, f.vpp,
+                                     f.adhesive, lam, f.divisor)
+        curv += form
+    else:
+        f.half_space.apply_in_buffer(inverse=False)
+        curv, slope, tmax, _ = _pass(_k.gcg_curvature, f.padded, f.t, f.pel, f.g, f.vp, f.vpp,
+                                     f.adhesive, lam, f.divisor)
+    curv, slope = global_sums(f.comm, curv, slope)
+    return curv, slope, f.comm.allreduce(tmax, op=MPI.MAX)
+
+
+def _step_length(f, s, curv, slope, tmax):
+    """The step ``tau`` along ``t``, and whether it was capped (a cap restarts the recurrence).
+
+    Steps are exact minimisers of the local quadratic model.  Where the
+    interaction's curvature makes the model non-convex along the direction,
+    the step moves the farthest-moving point by the law's length scale, and is
+    counted (``negative_curvature_steps``).  A convex adhesive step that would
+    move some point farther than that length is capped the same way: the
+    quadratic model of ``v`` holds only over changes of ``g`` small against the
+    length over which ``v'`` changes, and an almost vanishing curvature
+    ``t.K t + sum v''(g) t^2`` would otherwise send the iterate arbitrarily far,
+    raising the energy beyond recovery.  For a law whose ``v'`` jumps
+    (Maugis-Dugdale) the cap also keeps a point from crossing the jump more than
+    once per step.
+    """
+    if curv > 0:
+        tau = -slope / curv
+        if f.adhesive and tau * tmax > f.cap:  # beyond the quadratic model's reach
+            s.capped += 1
+            return f.cap / tmax, True
+        return tau, False
+    s.negative_curvature += 1
+    return (f.cap / tmax if tmax > 0 else 0.0), False
+
+
+def _advance(f, s, tau, restart, refresh_interval):
+    """``g += tau t``, then either project and restart, or follow ``p_el`` by the recurrence.
+
+    The projection acts (points went below the wall), the step was capped or
+    non-convex (``restart``), or ``p_el`` has followed by recurrence for
+    ``refresh_interval`` steps: then ``g`` is projected (the mean too, under
+    mean-gap control), ``p_el`` evaluated afresh, and the recurrence restarts
+    unless only the refresh was due (with ``two_level``, also when the projection put at
+    most :data:`KEEP_FRACTION` of ``F`` at the wall).  Otherwise the inverse half of the
+    transform begun by :func:`_curvature` completes ``K t`` and
+    ``p_el += tau K t``.
+    """
+    negative = f.comm.allreduce(_pass(_k.gcg_step, f.g, f.t, tau), op=MPI.SUM)
+    s.projected += negative > 0
+    if negative > 0 or restart or s.since_fresh >= refresh_interval:
+        if f.load:
+            np.maximum(f.g, 0.0, out=f.g)
+            f.load_gap()
+        else:
+            _project_mean(f.grid, f.g, f.target, f.h, f.padded, f.comm)
+        f.fresh_pressure()
+        s.fresh, s.since_fresh = True, 0
+        s.beta_ok = negative <= f.keep * s.n_free and not restart
+    else:
+        if f.half_space.splits_transforms:
+            f.half_space.finish()
+        _pass(_k.axpy, f.pel, f.padded, tau)
+        s.fresh = False
+        s.since_fresh += 1
+        s.beta_ok = True
+
+
+def _objective(f, s):
+    """Elastic + interaction energy + ``P0 A mean(g)`` (the load's work; constant under mean gap).
+
+    ``(1/2) sum p_el (g + h) + sum v(g) + P0 sum g``, times ``dx dy``: for
+    monitors that ask for what the solver minimises (collective).
+    """
+    local = 0.5 * float(np.sum(f.pel * (f.g + f.h)))
+    if f.adhesive:
+        local += float(np.sum(f.law.energy(f.g)))
+    if f.load:
+        local += s.lam * float(np.sum(f.g))
+    return f.grid.pixel_area * global_sums(f.comm, local)[0]
+
+
+def _control(problem, control):
+    """``(load, P0, mean gap)`` of a control, refused as the registry says
+    (:mod:`petgap.io.solver_registry`: a hard wall carries no tension)."""
+    refusal = registry.refusal(registry.Case(
+        solver="pcg-gap", control=control.kind, adhesive=problem.interaction.adhesive,
+        periodic=problem.half_space.periodic,
+        loads=(control.mean_pressure,) if isinstance(control, Load) else ()))
+    if refusal is not None:
+        raise ValueError(refusal.message())
+    if isinstance(control, Load):
+        return True, float(control.mean_pressure), None
+    if isinstance(control, MeanGap):
+        return False, 0.0, float(control.mean_gap)
+    raise TypeError(f"unknown control {control!r}")
 
 
 def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, monitor=None,
@@ -158,8 +469,8 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
     refresh_interval : int
         Recompute ``p_el`` from scratch at least this often.
     two_level : bool
-        Add the coarse term to the preconditioner (:mod:`petgap.solvers.gap_two_level`)
-        and keep conjugacy across projections.
+        The coarse term in the preconditioner, conjugacy kept across projections and
+        Polak-Ribiere+ (module docstring).
 
     Returns
     -------
@@ -167,217 +478,61 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         ``history`` holds the residuals; ``reason`` says why it stopped.
     """
     tolerance, max_iterations = settings.tolerance, settings.max_iterations
-    grid, comm = problem.grid, problem.grid.comm
-    h = problem.topography
-    half_space = problem.half_space
-    padded = grid.padded
     timer = Timer()
-    n = grid.npoints
-    interaction = problem.interaction
-    w = interaction.work if interaction.adhesive else 0.0
-    rho = interaction.range if interaction.adhesive else 1.0
-    load = isinstance(control, Load)
-    if load:
-        lam = float(control.mean_pressure)
-    elif isinstance(control, MeanGap):
-        target = float(control.mean_gap)
-        if not target >= 0:
-            raise ValueError(f"mean gap {target} < 0 is impossible with a hard wall (gap >= 0)")
-    else:
-        raise TypeError(f"unknown control {control!r}")
-    if load and not interaction.adhesive and lam < 0:
-        raise ValueError(f"mean pressure {lam} < 0: a non-adhesive interface cannot carry a "
-                         f"tensile load")
+    load, lam, target = _control(problem, control)
     start_ops = problem.operator_applications
-    mean_mode = problem.gap_scale / problem.pressure_scale  # c of the module docstring
     if not load and target == 0.0:
         return _full_contact(problem, control, timer)
-
-    g = np.empty(grid.local_shape)
-    if initial_gap is not None:
-        g[...] = np.maximum(initial_gap, 0.0)
-    else:
-        g[...] = -h
-    if load:
-        if initial_gap is None:
-            top = comm.allreduce(float(h.max()), op=MPI.MAX)
-            g += top
-        np.maximum(g, 0.0, out=g)
-        np.add(g, h, out=padded[:, :grid.ny])
-    else:
-        _project_mean(grid, g, target, h, padded, comm)
-    pel = np.empty(grid.local_shape)
-    t = np.zeros(grid.local_shape)
-    adh = bool(interaction.adhesive)
-    # v'(g), cached once per iteration (one exponential per point); unused for the hard wall
-    vp = np.empty(grid.local_shape) if adh else pel
-
-    def fresh_pressure():
-        half_space.apply_in_buffer(inverse=False)
-        _pass(_k.copy_from, pel, padded)
-
-    fresh_pressure()
-    fresh, since_fresh = True, 0
-    beta_ok, rz_old = False, 1.0
-    block = block_for(grid.shape) if two_level else 0
-    if block and load:
-        # the springs set the mean mode's stiffness: its compliance need only exceed every
-        # wave's (gap_two_level docstring)
-        mean_mode = max(grid.Lx, grid.Ly) / half_space.contact_modulus
-    coarse = CoarseTerm(grid, half_space.contact_modulus, block,
-                        mean_mode if load else 0.0) if block else None
-    keep = KEEP_FRACTION if two_level else 0.0
-    r_old = np.zeros(grid.local_shape) if two_level else None
-    split = half_space.splits_transforms
+    f = _Fields(problem, load, target, two_level)
+    s = _State(lam=lam, lam_f=lam if load else 0.0)
+    _start(f, initial_gap)
     history = []
-    negative_curvature = 0
-    counts = dict(capped=0, projected=0, released=0, refreshed=0)
     converged, reason, it = False, "max_iterations", 0
-    lam_f = lam if load else 0.0
     for it in range(max_iterations + 1):
-        if adh:
-            _pass(_k.gcg_interaction, g, vp, w, rho)
-        if not load:
-            s_open, n_open = global_sums(comm, *_pass(_k.gcg_open_sums, pel, g, vp, adh))
-            lam_f = -s_open / n_open if n_open > 0 else 0.0
-        s_free, n_free, gmax, gmin = _pass(_k.gcg_free_sums, pel, g, vp, adh, lam_f)
-        s_free, n_free = global_sums(comm, s_free, n_free)
-        if beta_ok and not load and n_free > n_open:
-            # points at the wall joined F: restart if one is pulled off it by half the
-            # last residual or more (module docstring).  One more pass, in the few
-            # iterations that would go on with points at the wall in F.
-            pull = 0.5 * history[-1] * problem.pressure_scale
-            strong = _pass(_k.gcg_free_sums, pel, g, vp, adh, lam_f + pull)[1]
-            beta_ok = comm.allreduce(strong, op=MPI.SUM) == n_open
-            counts["released"] += not beta_ok
-        ext = np.array([gmax, -gmin])
-        comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
-        if not load:
-            lam = -s_free / n_free if n_free > 0 else lam_f
-        if n_free > 0:
-            residual = max(ext[0] + lam, ext[1] - lam) / problem.pressure_scale
-        else:
-            residual = 0.0
-        def objective():
-            # elastic + interaction energy + P0 A mean(g) (the load's work; constant
-            # under mean-gap control): (1/2) sum pel (g + h) + sum v(g) + P0 sum g, x dx dy
-            local = 0.5 * float(np.sum(pel * (g + h)))
-            if adh:
-                local += float(np.sum(interaction.energy(g)))
-            if load:
-                local += lam * float(np.sum(g))
-            return grid.pixel_area * global_sums(comm, local)[0]
-        verdict = judge(residual, tolerance, fresh, it, max_iterations, history, monitor,
-                        objective)
+        f.fill_stress()
+        residual = _multiplier(f, s, history)
+        verdict = judge(residual, tolerance, s.fresh, it, max_iterations, history, monitor,
+                        lambda: _objective(f, s))
         if verdict == "refresh":
-            np.add(g, h, out=padded[:, :grid.ny])
-            fresh_pressure()
-            fresh, since_fresh = True, 0
+            f.load_gap()
+            f.fresh_pressure()
+            s.fresh, s.since_fresh = True, 0
             continue
         if verdict:
             converged, reason = verdict == "converged_kkt", verdict
             break
-
-        # preconditioned residual z = P_F K^{-1} P_F r (one pair)
-        _pass(_k.gcg_write_residual, pel, g, vp, adh, lam_f, lam, padded)
-        if coarse is not None:
-            coarse.set_springs(g, vp, adh, rho)
-            coarse.restrict(padded)
-        half_space.apply_in_buffer(inverse=True)
-        if coarse is not None:
-            coarse.correct(padded)
-        sum_z, rz, sum_r = global_sums(
-            comm, *_pass(_k.gcg_precond_sums, padded, pel, g, vp, adh, lam_f, lam))
-        if load:
-            # mean mode: z += c mean(r) on F, i.e. a shift of -c sum_r / n
-            zshift = -mean_mode * sum_r / n
-            rz += mean_mode * sum_r * sum_r / n
-        else:
-            zshift = sum_z / n_free
-        if r_old is not None:
-            # the preconditioner changes with the springs and the free set: Polak-Ribiere+;
-            # points that left F take their share of the old direction's mean with them
-            cross, sum_old, sum_t = global_sums(comm, *_pass(
-                _k.gcg_cross_sums, padded, r_old, t, pel, g, vp, adh, lam_f, lam))
-            if POLAK_RIBIERE:
-                beta = max(0.0, (rz - cross + zshift * sum_old) / rz_old) if beta_ok else 0.0
-            else:
-                beta = rz / rz_old if beta_ok else 0.0
-            if not load:
-                zshift -= beta * sum_t / n_free
-        else:
-            beta = rz / rz_old if beta_ok else 0.0
-        rz_old = rz
-        _pass(_k.gcg_direction, padded, pel, g, vp, adh, t, lam_f, zshift, beta)
-
-        # curvature along t: t.K t by Parseval from the forward half of K t, whose inverse
-        # half runs below only if p_el follows by the recurrence (a whole pair where the
-        # half-space has no halves)
-        if split:
-            form = half_space.begin_in_buffer(inverse=False)
-            curv, slope, tmax, reach = _pass(_k.gcg_curvature, None, t, pel, g, vp, adh,
-                                             lam if load else 0.0, rho)
-            curv += form
-        else:
-            half_space.apply_in_buffer(inverse=False)
-            curv, slope, tmax, reach = _pass(_k.gcg_curvature, padded, t, pel, g, vp, adh,
-                                             lam if load else 0.0, rho)
-        curv, slope = global_sums(comm, curv, slope)
-        tmax = comm.allreduce(tmax, op=MPI.MAX)
+        zshift, rz = _precondition(f, s)
+        beta, zshift = _beta(f, s, rz, zshift)
+        s.rz_old = rz
+        _pass(_k.gcg_direction, f.padded, f.pel, f.g, f.vp, f.adhesive, f.t, s.lam_f, zshift,
+              beta)
+        curv, slope, tmax = _curvature(f, s)
         if not slope < 0:
-            # not a descent direction (round-off or non-convexity): restart
-            beta_ok = False
-            if not fresh or (two_level and beta != 0.0):
-                # a kept conjugacy can leave a fresh state on an ascent direction
-                if not fresh:
-                    np.add(g, h, out=padded[:, :grid.ny])
-                    fresh_pressure()
-                    fresh, since_fresh = True, 0
+            # not a descent direction (round-off or non-convexity, or a direction kept
+            # across a projection): restart, from a fresh p_el
+            s.beta_ok = False
+            if not s.fresh or (f.two_level and beta != 0.0):
+                if not s.fresh:
+                    f.load_gap()
+                    f.fresh_pressure()
+                    s.fresh, s.since_fresh = True, 0
                 continue
             reason = "no_descent_direction"
             break
-        capped = False
-        if curv > 0:
-            tau = -slope / curv
-            if w > 0 and tau * tmax > rho:  # beyond the quadratic model's reach
-                tau, capped = rho / tmax, True
-        else:
-            negative_curvature += 1
-            tau = rho / tmax if tmax > 0 else 0.0
-        negative = comm.allreduce(_pass(_k.gcg_step, g, t, tau), op=MPI.SUM)
-        counts["capped"] += capped
-        counts["projected"] += negative > 0
-        counts["refreshed"] += since_fresh >= refresh_interval
-        if negative > 0 or curv <= 0 or capped or since_fresh >= refresh_interval:
-            # the projection acts: new free set, fresh elastic pressure, restart
-            if load:
-                np.maximum(g, 0.0, out=g)
-                np.add(g, h, out=padded[:, :grid.ny])
-            else:
-                _project_mean(grid, g, target, h, padded, comm)
-            fresh_pressure()
-            fresh, since_fresh = True, 0
-            beta_ok = negative <= keep * n_free and curv > 0 and not capped
-        else:
-            if split:
-                half_space.finish()
-            _pass(_k.axpy, pel, padded, tau)
-            fresh = False
-            since_fresh += 1
-            beta_ok = True
+        tau, capped = _step_length(f, s, curv, slope, tmax)
+        _advance(f, s, tau, capped or curv <= 0, refresh_interval)
 
-    pel += lam  # the total pressure, in place (no extra full-size array)
-    pressure = pel
-    contact = g <= 0
+    f.pel += s.lam  # the total pressure, in place (no extra full-size array)
     solution = problem.make_solution(
-        g, pressure, contact, control, converged=converged, reason=reason, solver="pcg-gap",
+        f.g, f.pel, f.g <= 0, control, converged=converged, reason=reason, solver="pcg-gap",
         iterations=it, operator_applications=problem.operator_applications - start_ops,
         wall_time=timer(), history=history)
-    solution.negative_curvature_steps = negative_curvature
-    solution.step_counts = dict(counts, negative_curvature=negative_curvature)
-    if coarse is not None:
-        solution.step_counts.update(coarse_iterations=coarse.inner_iterations,
-                                    coarse_clipped=coarse.clipped)
+    solution.negative_curvature_steps = s.negative_curvature
+    solution.step_counts = dict(projected=s.projected, released=s.released, capped=s.capped,
+                                negative_curvature=s.negative_curvature)
+    if f.coarse is not None:
+        solution.step_counts.update(coarse_iterations=f.coarse.inner_iterations,
+                                    coarse_clipped=f.coarse.clipped)
     return solution
 
 
@@ -391,7 +546,7 @@ def _full_contact(problem, control, timer):
     grid = problem.grid
     gap = np.zeros(grid.local_shape)
     p_el = problem.elastic_pressure(gap)
-    wall = problem.interaction.derivative(0.0) if problem.interaction.adhesive else 0.0
+    wall = float(problem.interaction.derivative(0.0))
     least = -grid.comm.allreduce(float(np.min(p_el)) + wall, op=MPI.MIN)
     solution = problem.make_solution(
         gap, p_el + least, gap <= 0, control, converged=True, reason="full_contact",

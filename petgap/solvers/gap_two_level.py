@@ -13,7 +13,7 @@ on it than ``K`` is.  Written out for a smooth ``phi`` and ``g = 1_F phi``::
 
 ``C`` the contact set: the patches act on long waves as springs of stiffness
 ``kappa`` per point, which grows like the inverse distance to the patch's edge
-and sums over a patch to about ``0.66 E* / a0`` per pair of neighbouring
+and sums over a patch to about :data:`EDGE_SPRING` per pair of neighbouring
 pixels across its edge.  ``K^{-1}`` misses the springs, so the preconditioned
 operator has eigenvalues far above 1 on long waves, more of them and larger
 the longer the cell's longest waves are against the patches' spacing: the
@@ -24,29 +24,40 @@ The springs and the long waves live on a coarse grid.  Let ``P`` interpolate
 coarse nodes every ``b`` pixels bilinearly onto the fine grid, ``R = P^T / b^2``
 average the fine grid onto them, ``Fc = R K^{-1} P`` be the coarse compliance
 (a Fourier symbol on the coarse grid, summed over the aliases of the hats'
-spectrum), and ``W = R s`` the springs ``s`` (``kappa`` estimated from the
-edge, plus ``D``) per coarse node, clipped at zero.  ``A ~ K + R^T W R`` and, by
-the Sherman-Morrison-Woodbury identity,
+spectrum), and ``W = R s`` the springs ``s`` per coarse node: ``kappa`` on the
+contact set, estimated from its edge, plus ``D`` on the free set.  Then
+``A ~ K + R^T W R`` and, by the Sherman-Morrison-Woodbury identity,
 
     A^{-1} ~ K^{-1} - K^{-1} R^T (W^{-1} + Fc)^{-1} R K^{-1}.
 
-On smooth fields ``K^{-1} R^T ~ P Fc / b^2`` and ``R K^{-1} ~ Fc R``, so the
-preconditioner is
+On smooth fields ``K^{-1} R^T ~ P Fc / b^2`` and ``R K^{-1} ~ Fc R``, so with
+``H = Fc^{1/2}`` (``Fc`` and ``H`` are Fourier multipliers on the coarse grid)
+the preconditioner is
 
-    z = K^{-1} r - P Fc y,   (I + W^{1/2} Fc W^{1/2}) W^{-1/2} y = W^{1/2} Fc R r,
+    z = K^{-1} r - P (Fc R r - H v),   (I + H W H) v = H R r,
 
-symmetric, and positive definite because ``W >= 0`` keeps the subtracted term
-below ``P Fc R``, which is below ``K^{-1}`` (the hats' low-pass keeps it so).
-The coarse system is solved by conjugate gradients to a relative residual of
-:data:`INNER_TOLERANCE`, alike on every rank (the coarse fields are summed
-over the ranks first), so the result does not depend on the decomposition
-beyond round-off.
+symmetric.  Where ``W >= 0`` it is positive definite: the subtracted term is
+then below ``P Fc R``, which is below ``K^{-1}``: the hats' low-pass keeps it so,
+``tests/solvers/test_gap_two_level.py`` checks it.  ``D`` makes ``W`` negative near contact edges with
+little contact, which gives the long waves there the softening the
+interaction adds; if that makes ``I + H W H`` indefinite (a state far from
+equilibrium, where the energy itself is not convex), the coarse conjugate
+gradients meet a direction of non-positive curvature and the term is formed
+with ``W`` clipped at zero instead (counted as ``coarse_clipped``).  The coarse
+system is solved to a relative residual of :data:`INNER_TOLERANCE`, alike on
+every rank (the coarse fields are summed over the ranks first), so the result
+does not depend on the decomposition beyond round-off.
+
+Under load control the mean mode is free; the coarse grid's mean mode gets the
+compliance of the cell's longest wave, and the springs give it the stiffness
+of the contact, which no fixed guess of it has (:mod:`petgap.solvers.gap_cg`).
 
 Cost per iteration: three passes over the slab (springs, restriction, the
 prolongation subtracted) and a few dozen transform pairs of the coarse grid,
-no transform of the fine grid.  The springs are estimated from the edge, not
-from ``K 1_C`` (a transform pair whenever ``C`` changes): the iterations hardly
-depend on their scale, within a factor 2 either way.
+no transform of the fine grid.  The springs on the contact set are estimated
+from its edge along the rows (:data:`EDGE_SPRING` per free neighbour), not from
+``K 1_C`` (a transform pair whenever ``C`` changes): the iterations hardly
+change when the springs are halved or doubled, nor with ``K 1_C`` itself.
 """
 import numpy as np
 from mpi4py import MPI
@@ -62,8 +73,11 @@ MIN_SIDE = 4
 #: Relative residual of the coarse system's conjugate gradients, and their limit.
 INNER_TOLERANCE = 1e-6
 MAX_INNER = 500
-#: Spring per pair of neighbouring pixels across a contact edge, in ``E* / a0``:
-#: the mean of ``K 1_C`` summed over the contact points per such pair.
+#: Spring per free neighbour along a row of a point at the wall, in ``E* / a0``: the
+#: mean of ``K 1_C`` summed over rough contacts per pair of neighbouring pixels
+#: across their edges (rows and columns).  Counted along the rows alone it gives
+#: about half of ``K 1_C``, well inside the factor 2 either way over which the
+#: iterations hardly change (module docstring).
 EDGE_SPRING = 0.66
 #: Aliases of the hats' spectrum summed a side for the coarse compliance (their
 #: weight falls like the fourth power of the alias' order).
@@ -143,10 +157,13 @@ class CoarseTerm:
         self.grid.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
         return local / float(self.block) ** 2
 
-    def set_springs(self, g, vp, adhesive, rho):
-        """``W`` from the contact edges and ``v''(g)`` of the current gap (one pass)."""
+    def set_springs(self, g, vp, vpp, adhesive, divisor):
+        """``W`` from the contact edges and ``v''(g)`` of the current gap (one pass).
+
+        ``vpp`` is the law's ``v''`` field, or None: then ``v'' = -v' / divisor``
+        (:class:`petgap.solvers.gap_cg._Fields`)."""
         local = np.zeros(self.coarse_shape)
-        _k.coarse_springs(g, vp, adhesive, rho, self.edge, self.x0, self.block, local)
+        _k.coarse_springs(g, vp, vpp, adhesive, divisor, self.edge, self.x0, self.block, local)
         self.springs = self._summed(local)
 
     def restrict(self, padded):
@@ -182,7 +199,7 @@ class CoarseTerm:
         return x
 
     def correct(self, padded):
-        """Subtract ``P (Fc R r - H v)`` from ``K^{-1} r`` in the FFT buffer."""
+        """Subtract ``P (Fc R r - H v)`` from ``K^{-1} r`` in the FFT buffer (module docstring)."""
         hr = self._filter(self.rhs, self.root_symbol)
         v = self._solve(self.springs, hr)
         if v is None:

@@ -34,8 +34,6 @@ def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *
     """
     tolerance, max_iterations = settings.tolerance, settings.max_iterations
     g_bar = float(control.mean_gap)
-    if not g_bar >= 0:
-        raise ValueError(f"mean gap {g_bar} < 0 is impossible with a hard wall (gap >= 0)")
     timer = Timer()
     reach = problem.top_height - problem.mean_height   # mean gap at first touch
     if g_bar >= reach:   # apart: the rigid surface lifted off the touching state

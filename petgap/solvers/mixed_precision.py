@@ -6,7 +6,7 @@ but the gap ``u - h + d`` is a difference of 7-digit numbers, so its KKT
 residual stops near ``1e-7 max|h| / h0``.  Most iterations of a solve are
 spent finding the contact set, which single precision finds as well as double;
 the last digits need double.  So: solve the problem's single-precision twin to
-:data:`petgap.io.scene.SINGLE_TOLERANCE_FLOOR` (or the requested tolerance, if
+:data:`petgap.io.solver_registry.SINGLE_TOLERANCE_FLOOR` (or the requested tolerance, if
 looser), drop it, and continue in double from its pressure.  The double solve
 starts on the single solution's contact set, which the refinement changes only
 at a few edge points.
@@ -21,8 +21,8 @@ its path depends on the decomposition at the level the single solve's already do
 """
 import numpy as np
 
-from petgap.io.scene import SINGLE_TOLERANCE_FLOOR
-from petgap.mechanics.problem import ContactProblem, Load, MeanGap
+from petgap.io.solver_registry import SINGLE_TOLERANCE_FLOOR
+from petgap.mechanics.problem import ContactProblem
 from petgap.parallel.grid import Grid
 from petgap.solvers.convergence import Timer
 from petgap.solvers.pressure_cg import polonsky_keer
@@ -32,15 +32,9 @@ from petgap.solvers.settings import SolverSettings
 def single_precision_twin(problem):
     """The same contact problem on a single-precision grid (collective).
 
-    Raises ValueError for what single precision does not solve: adhesion, a
-    free boundary.
+    What single precision solves (the hard wall on a periodic cell) is the
+    registry's rule (:mod:`petgap.io.solver_registry`), asked before a solve.
     """
-    if problem.interaction.adhesive:
-        raise ValueError("single and mixed precision are for non-adhesive contact "
-                         "(the pressure solver); use double precision with adhesion")
-    if not problem.half_space.periodic:
-        raise ValueError("single and mixed precision are for a periodic cell; use double "
-                         "precision on a free boundary")
     grid = problem.grid
     sgrid = Grid(grid.shape, size=(grid.Lx, grid.Ly), comm=grid.comm, planner=grid.planner,
                  wisdom=grid.wisdom, precision="single")
@@ -60,10 +54,10 @@ def solve_mixed(problem, control, settings=SolverSettings(search_precision="sing
     double solve's verdict is the result's.  The result's iterations, operator
     applications and history are the sums over both solves (the coarse start's
     not counted, as in every pressure solve); ``start`` says how each went, and
-    ``precision`` is ``"mixed"``.  Collective.
+    ``precision`` is ``"mixed"``.  What it solves (the hard wall on a periodic cell,
+    under load or mean gap) the registry says (:mod:`petgap.io.solver_registry`),
+    asked by :func:`petgap.solvers.dispatch.run` first.  Collective.
     """
-    if not isinstance(control, (Load, MeanGap)):
-        raise TypeError(f"mixed precision solves load or mean-gap control, not {control!r}")
     timer = Timer()
     tolerance, max_iterations = settings.tolerance, settings.max_iterations
     twin = single_precision_twin(problem)

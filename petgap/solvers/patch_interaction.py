@@ -38,13 +38,14 @@ linear operator at every iteration to within a millionth; the coarse grid is
 replicated on every rank, which receive the same block sums and so compute the
 same ``y``.  With it the preconditioned condition number on a fixed contact
 set no longer grows with the grid (``benchmarks/patch_spectrum.py``;
-docs/benchmarks.md, "The preconditioner's patch interaction").
+docs/design.md, "The patch interaction").
 
 The term is smooth over whole blocks, and the solver's projection onto ``p >=
-0`` is not: :func:`~petgap.solvers.pressure_cg.polonsky_keer` applies it only
-once the contact set has nearly stopped changing, and withdraws it for a while
-when the residual rose after a step with it (its module docstring says why).
-The solver makes it under load control only (the same docstring says why).
+0`` is not: the pressure solver applies it only once the contact set has nearly
+stopped changing, and withdraws it for a while when the residual rose after a
+step with it (:class:`petgap.solvers.preconditioners.PatchAdmission`; docs/design.md,
+"When the patch interaction applies").  The solver makes it under load control
+only (:class:`petgap.solvers.preconditioners.RestrictedStiffness` says why).
 
 Cost: one pass over ``S`` for the block sums, one to subtract ``V y``, an
 all-reduce of two coarse fields, and a few dozen transforms of the coarse grid,
@@ -52,9 +53,9 @@ small beside a transform pair of the fine grid.  The coarse grid is solved
 alike on every rank, whatever their number, so its cost does not shrink as the
 ranks share the fine grid: beyond :data:`MAX_SIDE` blocks a side the blocks
 grow instead (at 16384^2, 256 blocks of 64 pixels).  Larger blocks model the
-far field more coarsely, but where both were measured they converged about as
-fast as 32-pixel blocks, and far faster than no term (docs/benchmarks.md, "The
-preconditioner's patch interaction").  Periodic cells only: on a free boundary
+far field more coarsely, but converge about as fast as 32-pixel blocks, and far
+faster than no term (docs/benchmarks.md, "The preconditioner's patch
+interaction").  Periodic cells only: on a free boundary
 the far field is a different operator.
 """
 import numpy as np
@@ -70,8 +71,8 @@ MAX_SIDE = 256
 #: Fewest blocks a side for the correction to be made at all: with fewer the
 #: cell's longest wavelengths are too few patches long for their far field to
 #: matter beside the cost of the coarse solve (grids below 1024^2 with 32-pixel
-#: blocks, among them the coarse start's levels below that: at 512^2 it saved
-#: 2 of 13 iterations and cost more time than that, docs/benchmarks.md).
+#: blocks, among them the coarse start's levels below that: there it costs more
+#: time than it saves, docs/benchmarks.md).
 MIN_SIDE = 32
 #: Relative residual to which the coarse system is solved.  The term is then
 #: off by that share of itself, far below what one outer iteration gains (a

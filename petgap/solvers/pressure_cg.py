@@ -108,7 +108,8 @@ zero by construction: ``p >= 0`` and ``p = 0`` off ``S``).
 import numpy as np
 from mpi4py import MPI
 
-from petgap.mechanics.problem import Indentation, Load, MeanGap
+from petgap.io import solver_registry as registry
+from petgap.mechanics.problem import Load, MeanGap
 from petgap.parallel.collective import global_sums
 from petgap.parallel.log import GAP_PASS_EVENT, SET_UPDATE_EVENT, event
 from petgap.solvers import _contact_set as _cs
@@ -144,9 +145,9 @@ def polonsky_keer(problem, control, settings=SolverSettings(), *, initial_pressu
     problem : petgap.mechanics.problem.ContactProblem
         Must be non-adhesive.
     control : Load, MeanGap or Indentation
-        Mean gap on a periodic cell only (on a free boundary it is reached through
-        the indentation: :func:`petgap.solvers.indentation.solve_mean_gap_by_indentation`);
-        indentation on a free boundary only.
+        What :mod:`petgap.io.solver_registry` lets ``pcg-pressure`` take; a mean gap on a
+        periodic cell only (on a free boundary it is reached through the indentation:
+        :func:`petgap.solvers.indentation.solve_mean_gap_by_indentation`).
     settings : petgap.solvers.settings.SolverSettings
         Tolerance (of the gap KKT residual ``max|g on S|, max(-g off S)`` over
         ``h0``), iteration limit, start and preconditioner.
@@ -180,37 +181,23 @@ def _control_target(problem, control):
 
     Under load the offset follows from the set at every iteration (0 here); on a
     periodic cell ``u`` has zero mean, so a mean gap fixes it; on a free boundary
-    the indentation depth does.
+    the indentation depth does.  What the solver takes is the registry's to say
+    (:mod:`petgap.io.solver_registry`); a mean gap on a free boundary is reached
+    through the indentation, one level up.
     """
     periodic = problem.half_space.periodic
-    if problem.interaction.adhesive:
-        raise ValueError("the Polonsky-Keer solver handles non-adhesive contact only; "
-                         "use a gap-based solver for adhesion")
-    if isinstance(control, Load):
-        target = float(control.mean_pressure)
-        if not target >= 0:
-            raise ValueError(f"mean pressure {target} < 0: a non-adhesive interface cannot "
-                             f"carry a tensile load; use a positive load or an adhesive "
-                             f"interaction")
-        return True, target, 0.0
-    if isinstance(control, MeanGap):
-        if not periodic:
-            raise ValueError("on a free boundary the mean gap is reached through the "
-                             "indentation (solve_mean_gap_by_indentation)")
-        target = float(control.mean_gap)
-        if not target >= 0:
-            raise ValueError(f"mean gap {target} < 0 is impossible with a hard wall (gap >= 0)")
-        return False, target, problem.mean_height + target
-    if isinstance(control, Indentation):
-        if periodic:
-            raise ValueError("indentation control needs a free boundary: the periodic "
-                             "half-space has no stiffness for the mean, so an approach "
-                             "fixes no load; use load or mean-gap control")
-        target = float(control.depth)
-        if not target >= 0:
-            raise ValueError(f"indentation depth {target} < 0: the surfaces do not touch")
-        return False, target, problem.top_height - target
-    raise TypeError(f"unknown control {control!r}")
+    refusal = registry.refusal(registry.Case(
+        solver="pcg-pressure", control=control.kind, adhesive=problem.interaction.adhesive,
+        periodic=periodic, loads=(control.mean_pressure,) if isinstance(control, Load) else ()))
+    if refusal is not None:
+        raise ValueError(refusal.message())
+    if isinstance(control, MeanGap) and not periodic:
+        raise ValueError("on a free boundary the mean gap is reached through the "
+                         "indentation (petgap.solvers.indentation)")
+    target = float(control.value)
+    offset = {"load": 0.0, "mean-gap": problem.mean_height + target,
+              "indentation": problem.top_height - target}[control.kind]
+    return isinstance(control, Load), target, offset
 
 
 class PressureCG:

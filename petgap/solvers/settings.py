@@ -1,15 +1,19 @@
 """The settings of a solve: one frozen value, checked once where it is made.
 
-A scene's ``[solver]`` section, the PETSc options of a run (``-petgap_*``) and the
-keywords of :func:`petgap.solve` all become one :class:`SolverSettings` at the
-edge of the program; the solvers receive it and never read an options database.
-Each field is checked here, once, with the key and what is allowed named in the
-error, so that no solver re-validates what it was given.
+A scene's ``[solver]`` section (which the builder hands to :func:`petgap.solve` as its
+keywords, :attr:`petgap.app.build.Model.solve_options`), the PETSc options of a run
+(``-petgap_*``, ``-tao_type``) and the keywords of :func:`petgap.solve` all become one
+:class:`SolverSettings` in one place, :func:`read_settings`, at the edge of the
+program; the solvers receive it and never read an options database.  Each field is
+checked here, once, with the key and what is allowed named in the error, so that no
+solver re-validates what it was given.
 """
 from dataclasses import dataclass, replace
 
 import numpy as np
+from petsc4py import PETSc
 
+from petgap.io.solver_registry import ALIASES, PRECISIONS, SOLVER_NAMES, choice_refusal
 from petgap.solvers.coarse import COARSE_TOLERANCE
 from petgap.solvers.edge_correction import EDGE_CORRECTION
 from petgap.solvers.patch_interaction import BLOCK
@@ -45,6 +49,14 @@ class SolverSettings:
         grid (:mod:`petgap.solvers.pressure_cg`, "Precision").
     preconditioned : bool
         Precondition the pressure solver with the restricted stiffness.
+    solver : str
+        The solver type asked for (:data:`petgap.io.solver_registry.SOLVER_NAMES`);
+        ``"pcg"`` is resolved for each problem and control
+        (:func:`petgap.io.solver_registry.resolve`).
+    precision : {"double", "single", "mixed"}
+        The floating point of the solve, decided once against the problem's grid
+        (:func:`read_settings`): single is a problem on a single-precision grid, mixed
+        a double problem solved first on its single twin.
     """
 
     tolerance: float = 1e-8
@@ -55,8 +67,14 @@ class SolverSettings:
     interaction_block: int = BLOCK
     search_precision: str = "double"
     preconditioned: bool = True
+    solver: str = "pcg"
+    precision: str = "double"
 
     def __post_init__(self):
+        for refusal in (choice_refusal("solver", self.solver, SOLVER_NAMES),
+                        choice_refusal("precision", self.precision, PRECISIONS)):
+            if refusal is not None:
+                raise ValueError(refusal.message())
         problems = [problem for problem in (
             _number_in(self.tolerance, "tolerance", 0, 1, "the tolerance is a number in (0, 1), e.g. 1e-8"),
             None if _whole(self.max_iterations) and self.max_iterations >= 0 else
@@ -93,3 +111,42 @@ def _whole(value):
 def _number_in(value, key, low, high, allowed):
     """None when ``low < value < high``, else ``(key, value, allowed)``."""
     return None if _real(value) and low < value < high else (key, value, allowed)
+
+
+#: petgap's own PETSc options: the :class:`SolverSettings` field each sets, and the kind
+#: of value it takes (as :data:`petgap.solvers.tao.KNOWN_OPTIONS` says it).
+PETGAP_OPTIONS = {"petgap_coarse_start": ("coarse_start", "bool"),
+                  "petgap_coarse_tolerance": ("coarse_tolerance", "real"),
+                  "petgap_edge_correction": ("edge_correction", "real"),
+                  "petgap_interaction_block": ("interaction_block", "int"),
+                  "petgap_search_precision": ("search_precision", "precision")}
+
+
+def read_settings(grid_precision, *, solver="pcg", tolerance=1e-8, max_iterations=10000,
+                  precision=None):
+    """The settings of one solve: the keywords of :func:`petgap.solve` and PETSc's options.
+
+    The options database is read as it stands: the caller puts a solve's own options
+    in it first (:class:`petgap.solvers.dispatch.petsc_options`).  ``-tao_type`` has
+    the last word on the solver (TAO's ``python`` is ``pcg``), ``-petgap_*`` set the
+    fields of :data:`PETGAP_OPTIONS`.  ``precision`` defaults to the grid's
+    (``grid_precision``); a mixed solve finds its steps in single precision unless
+    ``-petgap_search_precision`` says otherwise.  Raises ValueError naming the
+    keyword or option and what is allowed.
+    """
+    refusal = choice_refusal("solver", solver, SOLVER_NAMES)
+    if refusal is not None:
+        raise ValueError(refusal.message())
+    db = PETSc.Options()
+    asked = db.getString("tao_type", solver)
+    refusal = choice_refusal("-tao_type", ALIASES.get(asked, asked), SOLVER_NAMES)
+    if refusal is not None:
+        raise ValueError(refusal.message())
+    precision = grid_precision if precision is None else precision
+    defaults = SolverSettings(search_precision="single" if precision == "mixed" else "double")
+    read = {"bool": db.getBool, "real": db.getReal, "int": db.getInt,
+            "precision": db.getString}
+    options = {field: read[kind](name, getattr(defaults, field))
+               for name, (field, kind) in PETGAP_OPTIONS.items()}
+    return SolverSettings(tolerance=tolerance, max_iterations=max_iterations,
+                          solver=ALIASES.get(asked, asked), precision=precision, **options)

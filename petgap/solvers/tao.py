@@ -4,6 +4,10 @@ The TAO object is created for every solve with the solution Vec laid out as
 the grid's real-space slab, and ``setFromOptions()`` is called last, so the
 PETSc options database (``-tao_type``, ``-tao_monitor``, ``-tao_max_it``,
 ``-tao_view``, ``-log_view``...) has the final word, as every PETSc user expects.
+The options of one solve are put in the database by the caller
+(:func:`petgap.solvers.dispatch.solve`) for the whole solve; petgap's own options
+reach this module only through the :class:`~petgap.solvers.settings.SolverSettings`
+read there.
 
 * petgap's own conjugate-gradient solvers run inside a TAO ``python`` type
   (:class:`_PetgapTao`), so that TAO's monitors and views see them;
@@ -15,7 +19,8 @@ PETSc options database (``-tao_type``, ``-tao_monitor``, ``-tao_max_it``,
   (:func:`solve_mean_gap_by_multiplier`), adhesive load control by a secant on
   the mean gap (:func:`solve_load_by_mean_gap`).
 
-:func:`petgap.solvers.dispatch.solve` chooses among them.
+:func:`solve_as` runs a solver type the registry resolved
+(:mod:`petgap.io.solver_registry`) through the loop its control needs.
 """
 import difflib
 import math
@@ -25,30 +30,54 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from petgap.io.solver_registry import PETGAP_TYPES, method
 from petgap.mechanics.problem import Load, MeanGap
-from petgap.solvers.coarse import COARSE_TOLERANCE
 from petgap.solvers.convergence import Timer
-from petgap.solvers.edge_correction import EDGE_CORRECTION
 from petgap.solvers.gap_cg import gap_cg
-from petgap.solvers.patch_interaction import BLOCK
 from petgap.solvers.pressure_cg import polonsky_keer
-from petgap.solvers.settings import SolverSettings
+from petgap.solvers.settings import PETGAP_OPTIONS
 
-#: The solver types run by petgap's own solvers inside a TAO ``python`` type.
-PETGAP_TYPES = ("pcg", "pcg-pressure", "pcg-gap")
 _REASONS = {v: k for k, v in vars(PETSc.TAO.Reason).items() if not k.startswith("_")}
 
+
+#: A TAO built-in stops as ``"stalled_round_off"`` when its KKT residual has not fallen
+#: below ``TAO_STALL_FACTOR`` times its best for ``TAO_STALL_ITERATIONS`` iterations, or
+#: for twice the iterations it took to reach that best if more: its line search then
+#: compares energies whose differences are below double round-off, and more iterations
+#: do not move it.  The window is wide because a healthy built-in solve can sit on a
+#: plateau for a couple of hundred iterations before it falls again.
+TAO_STALL_ITERATIONS = 500
+TAO_STALL_FACTOR = 0.9
 
 #: Options that set TAO monitors printing the objective.
 TAO_MONITORS = ("tao_monitor", "tao_smonitor", "tao_cmonitor", "tao_gmonitor")
 
 
+def solve_as(problem, control, kind, settings, initial=None, monitor=None):
+    """Solve a periodic ``problem`` (or a free map by the pressure solver) with type ``kind``.
+
+    ``kind`` is a resolved solver type (never ``"pcg"``:
+    :func:`petgap.io.solver_registry.resolve`), run through the loop its control needs
+    (:func:`petgap.io.solver_registry.method`): adhesive load control on the gap by
+    :func:`solve_load_by_mean_gap`, mean-gap control of a TAO built-in by
+    :func:`solve_mean_gap_by_multiplier`, anything else by one :func:`tao_solve`.
+    ``initial`` is a warm start (a previous solution).  Collective.
+    """
+    how = method(kind, control.kind, problem.interaction.adhesive, problem.half_space.periodic)
+    loops = {"mean-gap secant": solve_load_by_mean_gap, "multiplier": solve_mean_gap_by_multiplier,
+             "direct": tao_solve}
+    if how not in loops:
+        raise ValueError(f"{kind} reaches {control.kind} control here by {how!r}, which "
+                         f"petgap.solvers.dispatch.run runs, not a TAO solve")
+    return loops[how](problem, control, kind, settings, initial, monitor)
+
+
 class _PetgapTao:
     """TAO ``python`` context running one of petgap's own conjugate-gradient solvers."""
 
-    def __init__(self, kind, problem, control, tolerance, initial, monitor):
+    def __init__(self, kind, problem, control, settings, initial, monitor):
         self.kind, self.problem, self.control = kind, problem, control
-        self.tolerance, self.initial, self.monitor = tolerance, initial, monitor
+        self.settings, self.initial, self.monitor = settings, initial, monitor
         self.solution = None
 
     def solve(self, tao):
@@ -66,17 +95,16 @@ class _PetgapTao:
         # over the contact set or the fields per iteration) only when one is asked for
         report.wants_objective = caller_wants or any(PETSc.Options().hasName(name)
                                                      for name in TAO_MONITORS)
-        maxit = tao.getMaximumIterations()
+        # -tao_max_it, read by setFromOptions, has the last word on the limit
+        settings = self.settings.but(max_iterations=tao.getMaximumIterations())
         if self.kind == "pcg-pressure":
             self.solution = polonsky_keer(
-                self.problem, self.control, SolverSettings(
-                    tolerance=self.tolerance, max_iterations=maxit, **pressure_solver_options()),
+                self.problem, self.control, settings,
                 initial_pressure=None if self.initial is None else self.initial.pressure,
                 monitor=report)
         else:
             self.solution = gap_cg(
-                self.problem, self.control,
-                SolverSettings(tolerance=self.tolerance, max_iterations=maxit),
+                self.problem, self.control, settings,
                 initial_gap=None if self.initial is None else self.initial.gap, monitor=report)
         tao.setIterationNumber(self.solution.iterations)
         tao.setConvergedReason(PETSc.TAO.Reason.CONVERGED_USER if self.solution.converged
@@ -86,7 +114,8 @@ class _PetgapTao:
         viewer.printfASCII(f"petgap preconditioned projected conjugate gradients ({self.kind})\n")
 
 
-def tao_solve(problem, control, tao_type, tolerance, max_iterations, initial, options, monitor):
+def tao_solve(problem, control, kind, settings, initial=None, monitor=None):
+    """One TAO solve of ``control`` with type ``kind`` (petgap's own or a built-in).  Collective."""
     grid = problem.grid
     comm = grid.comm
     timer = Timer()
@@ -94,26 +123,22 @@ def tao_solve(problem, control, tao_type, tolerance, max_iterations, initial, op
     # petgap's own types keep their fields themselves and return them in the
     # solution: TAO gets an empty solution Vec, not a slab-sized copy of the gap
     # (8 bytes per point at the solve's peak)
-    own = tao_type in PETGAP_TYPES
+    own = kind in PETGAP_TYPES
     x = PETSc.Vec().createMPI((0 if own else nloc, 0 if own else grid.npoints), comm=comm)
     tao = PETSc.TAO().create(comm=comm)
     try:
         tao.setSolution(x)
-        tao.setMaximumIterations(max_iterations)
-        if tao_type in PETGAP_TYPES:
-            context = _PetgapTao(tao_type, problem, control, tolerance, initial, monitor)
+        tao.setMaximumIterations(settings.max_iterations)
+        if own:
+            context = _PetgapTao(kind, problem, control, settings, initial, monitor)
             tao.setType(PETSc.TAO.Type.PYTHON)
             tao.setPythonContext(context)
-            # The options stay in force through the solve: TAO reads some of
-            # them there (-tao_view, -tao_converged_reason), not in setFromOptions.
-            with petsc_options(options):
-                tao.setFromOptions()
-                tao.solve()
+            tao.setFromOptions()
+            tao.solve()
             solution = context.solution
             solution.wall_time = timer()
             return solution
-        return _gap_tao(problem, control, tao, x, tao_type, tolerance, initial, options,
-                        monitor, timer)
+        return _gap_tao(problem, control, tao, x, kind, settings, initial, monitor, timer)
     finally:
         tao.destroy()
         x.destroy()
@@ -200,14 +225,72 @@ class DimensionlessGap:
         return GapHessian(self.problem, shape, gap_unit=self.length, energy_unit=self.energy)
 
 
-def _gap_tao(problem, control, tao, x, tao_type, tolerance, initial, options, monitor, timer):
+class _GapCallbacks:
+    """TAO's callbacks for a built-in on :class:`DimensionlessGap`: objective, test, Hessian.
+
+    TAO hands its convergence test a *projected* gradient (zero on active bounds),
+    which would hide tension at contact points.  The residual is therefore computed
+    inside the objective callback from the full gradient and matched to the accepted
+    iterate by a fingerprint of the variables.
+    """
+
+    def __init__(self, scaled, x, gradient, tolerance, monitor):
+        self.scaled, self.x, self.gradient = scaled, x, gradient
+        self.shape = scaled.problem.grid.local_shape
+        self.comm = scaled.problem.grid.comm
+        self.tolerance, self.monitor = tolerance, monitor
+        self.residual, self.key = None, None
+        self.best, self.best_at, self.stalled = np.inf, 0, False
+
+    @staticmethod
+    def fingerprint(xa):
+        return (float(xa.sum()), float(np.vdot(xa, xa)))
+
+    def objective_gradient(self, tao, xv, gv):
+        xa = xv.getArray(readonly=True).reshape(self.shape)
+        f, self.residual = self.scaled.evaluate(xa, gv.getArray().reshape(self.shape))
+        self.key = self.fingerprint(xa)
+        return f
+
+    def convergence_test(self, tao):
+        xa = self.x.getArray(readonly=True).reshape(self.shape)
+        same = self.comm.allreduce(self.fingerprint(xa) == self.key, op=MPI.LAND)
+        if not same:  # the last evaluation was not at the accepted point
+            _, self.residual = self.scaled.evaluate(
+                xa, self.gradient.getArray().reshape(self.shape))
+            self.key = self.fingerprint(xa)
+        residual = self.residual
+        it = tao.getIterationNumber()
+        if self.monitor is not None:
+            self.monitor(it, residual)
+        if not np.isfinite(residual):
+            tao.setConvergedReason(PETSc.TAO.Reason.DIVERGED_NAN)
+        elif residual <= self.tolerance:
+            tao.setConvergedReason(PETSc.TAO.Reason.CONVERGED_USER)
+        elif it >= tao.getMaximumIterations():
+            tao.setConvergedReason(PETSc.TAO.Reason.DIVERGED_MAXITS)
+        elif self._stalls(it, residual):
+            self.stalled = True
+            tao.setConvergedReason(PETSc.TAO.Reason.DIVERGED_USER)
+        else:
+            tao.setConvergedReason(PETSc.TAO.Reason.CONTINUE_ITERATING)
+
+    def _stalls(self, it, residual):
+        """Whether the residual has stopped falling (:data:`TAO_STALL_ITERATIONS`)."""
+        if residual < TAO_STALL_FACTOR * self.best:
+            self.best, self.best_at = residual, it
+            return False
+        return it - self.best_at >= max(TAO_STALL_ITERATIONS, 2 * self.best_at)
+
+    def update_hessian(self, tao, xv, H, P):
+        H.getPythonContext().set_point(xv.getArray(readonly=True).reshape(self.shape))
+
+
+def _gap_tao(problem, control, tao, x, kind, settings, initial, monitor, timer):
     """Run a TAO built-in on the dimensionless load-control energy (:class:`DimensionlessGap`)."""
     grid = problem.grid
     shape = grid.local_shape
     mean_pressure = float(control.mean_pressure)
-    if mean_pressure < 0 and not problem.interaction.adhesive:
-        raise ValueError(f"mean pressure {mean_pressure} < 0: a non-adhesive interface cannot "
-                         f"carry a tensile load")
     scaled = DimensionlessGap(problem, mean_pressure)
     gradient = x.duplicate()
     lower = x.duplicate()
@@ -216,68 +299,31 @@ def _gap_tao(problem, control, tao, x, tao_type, tolerance, initial, options, mo
     upper.set(PETSc.INFINITY)
     start_ops = problem.operator_applications
     scaled.set_start(x.getArray().reshape(shape), initial)
-    # TAO hands its convergence test a *projected* gradient (zero on active
-    # bounds), which would hide tension at contact points.  The residual is
-    # therefore computed inside the objective callback from the full gradient
-    # and matched to the accepted iterate by a fingerprint of the variables.
-    cache = {}
-
-    def fingerprint(xa):
-        return (float(xa.sum()), float(np.vdot(xa, xa)))
-
-    def objective_gradient(tao, xv, gv):
-        xa = xv.getArray(readonly=True).reshape(shape)
-        f, cache["residual"] = scaled.evaluate(xa, gv.getArray().reshape(shape))
-        cache["key"] = fingerprint(xa)
-        return f
-
-    def convergence_test(tao):
-        xa = x.getArray(readonly=True).reshape(shape)
-        same = grid.comm.allreduce(fingerprint(xa) == cache.get("key"), op=MPI.LAND)
-        if not same:  # the last evaluation was not at the accepted point
-            _, cache["residual"] = scaled.evaluate(xa, gradient.getArray().reshape(shape))
-            cache["key"] = fingerprint(xa)
-        residual = cache["residual"]
-        it = tao.getIterationNumber()
-        if monitor is not None:
-            monitor(it, residual)
-        if not np.isfinite(residual):
-            tao.setConvergedReason(PETSc.TAO.Reason.DIVERGED_NAN)
-        elif residual <= tolerance:
-            tao.setConvergedReason(PETSc.TAO.Reason.CONVERGED_USER)
-        elif it >= tao.getMaximumIterations():
-            tao.setConvergedReason(PETSc.TAO.Reason.DIVERGED_MAXITS)
-        else:
-            tao.setConvergedReason(PETSc.TAO.Reason.CONTINUE_ITERATING)
-
+    calls = _GapCallbacks(scaled, x, gradient, settings.tolerance, monitor)
     hessian = PETSc.Mat().createPython(((x.getLocalSize(), x.getSize()),) * 2,
                                        scaled.hessian(shape), comm=grid.comm)
     hessian.setUp()
-
-    def update_hessian(tao, xv, H, P):
-        H.getPythonContext().set_point(xv.getArray(readonly=True).reshape(shape))
-
     try:
-        tao.setType(tao_type)
-        tao.setObjectiveGradient(objective_gradient, gradient)
-        tao.setHessian(update_hessian, hessian)
+        tao.setType(kind)
+        tao.setObjectiveGradient(calls.objective_gradient, gradient)
+        tao.setHessian(calls.update_hessian, hessian)
         tao.setVariableBounds((lower, upper))
-        tao.setConvergenceTest(convergence_test)
+        tao.setConvergenceTest(calls.convergence_test)
         tao.setTolerances(gatol=0.0, grtol=0.0, gttol=0.0)
         ksp = tao.getKSP()
         if ksp is not None and ksp.handle:
             ksp.getPC().setType("none")  # matrix-free Hessian: no entries to factor
-        with petsc_options(options):  # through the solve, as in tao_solve
-            tao.setFromOptions()
-            tao.solve()
+        tao.setFromOptions()
+        tao.solve()
         reason_code = tao.getConvergedReason()
-        reason = _REASONS.get(reason_code, str(reason_code)).lower()
+        reason = ("stalled_round_off" if calls.stalled
+                  else _REASONS.get(reason_code, str(reason_code)).lower())
         converged = reason_code == PETSc.TAO.Reason.CONVERGED_USER
         g = scaled.physical_gap(x.getArray(readonly=True).reshape(shape))  # the scratch, kept
         pressure = problem.elastic_pressure(g) + mean_pressure
         return problem.make_solution(
             g, pressure, g <= 0, control, converged=converged,
-            reason="converged_kkt" if converged else reason, solver=tao_type,
+            reason="converged_kkt" if converged else reason, solver=kind,
             iterations=tao.getIterationNumber(),
             operator_applications=problem.operator_applications - start_ops,
             wall_time=timer())
@@ -286,35 +332,66 @@ def _gap_tao(problem, control, tao, x, tao_type, tolerance, initial, options, mo
             v.destroy()
 
 
-def solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance, max_iterations,
-                                  initial, options, monitor, max_outer=60):
+def solve_mean_gap_by_multiplier(problem, control, kind, settings, initial=None, monitor=None,
+                                 max_outer=60):
     """Mean-gap control for gap-space TAO types: secant on log(P0) until mean(g) = g_bar.
 
     Inexact: each inner load-control solve is only as accurate as the step it
     serves (:func:`_inner_tolerance`).  Why not a fixed inner tolerance well
     below the outer one: TAO's line searches compare energies, whose round-off
-    hides the decrease of a step once the KKT residual is below about ``1e-9``
-    at 128^2, so a fixed ``tolerance / 100`` is out of reach and would spend
-    the whole iteration budget of a step on its first inner solve, at a guessed
-    ``P0`` that the secant would replace anyway.  Every constant here is in the problem's
-    scales (``h0``, ``h0' E*``), so the iterations are the same in every unit
-    system.
+    hides the decrease of a step once the KKT residual nears it, so a fixed
+    ``tolerance / 100`` may be out of reach and would spend the whole iteration
+    budget of a step on its first inner solve, at a guessed ``P0`` that the secant
+    would replace anyway.  Every constant here is in the problem's scales (``h0``,
+    ``h0' E*``), so the iterations are the same in every unit system.
     """
     timer = Timer()
     target = float(control.mean_gap)
-    if not target >= 0:
-        raise ValueError(f"mean gap {target} < 0 is impossible with a hard wall (gap >= 0)")
-    h0, ps = problem.gap_scale, problem.pressure_scale
+    tolerance = settings.tolerance
+    apart = _apart(problem, control, kind, timer)
+    if apart is not None:
+        return apart
+    start_ops = problem.operator_applications
+    solution, iterations, history, exhausted = _multiplier_secant(
+        problem, target, kind, settings, initial, monitor, max_outer)
+    usable = _meets_kkt(solution, tolerance)
+    converged = not exhausted and usable and \
+        abs((solution.mean_gap - target) / problem.gap_scale) <= tolerance
+    reason = "converged_kkt" if converged else "max_iterations" if exhausted else \
+        (solution.reason if not usable else "multiplier_not_converged")
+    return problem.make_solution(
+        solution.gap, solution.pressure, solution.gap <= 0, control, converged=converged,
+        reason=reason, solver=f"{kind}+multiplier", iterations=iterations,
+        operator_applications=problem.operator_applications - start_ops, wall_time=timer(),
+        history=history)
+
+
+def _apart(problem, control, kind, timer):
+    """The undeformed state when the hard wall's highest summit stays clear of the mean gap.
+
+    No contact, no pressure: the rigid surface held ``g_bar`` above its mean height.
+    None when there is contact to solve for (or an adhesive interaction).
+    """
+    target = float(control.mean_gap)
     grid = problem.grid
     top = grid.comm.allreduce(float(problem.topography.max()), op=MPI.MAX)
-    if not problem.interaction.adhesive and target >= top - problem.mean_height:
-        # the rigid surface's highest summit stays clear: no contact, no pressure
-        gap = target + problem.mean_height - problem.topography
-        zero = np.zeros(grid.local_shape)
-        return problem.make_solution(gap, zero, gap <= 0, control, converged=True,
-                                     reason="no_contact", solver=f"{tao_type}+multiplier",
-                                     iterations=0, operator_applications=0, wall_time=timer())
-    start_ops = problem.operator_applications
+    if problem.interaction.adhesive or target < top - problem.mean_height:
+        return None
+    gap = target + problem.mean_height - problem.topography
+    zero = np.zeros(grid.local_shape)
+    return problem.make_solution(gap, zero, gap <= 0, control, converged=True,
+                                 reason="no_contact", solver=f"{kind}+multiplier",
+                                 iterations=0, operator_applications=0, wall_time=timer())
+
+
+def _multiplier_secant(problem, target, kind, settings, initial, monitor, max_outer):
+    """The secant on ``log(P0 / h0' E*)`` of :func:`solve_mean_gap_by_multiplier`.
+
+    Returns the last inner solution, the iterations summed, the history of
+    ``(P0, mean gap)`` and whether the iteration limit ended it.
+    """
+    h0, ps = problem.gap_scale, problem.pressure_scale
+    tolerance, max_iterations = settings.tolerance, settings.max_iterations
     iterations = 0
     history = []
     # Starting guess: the previous multiplier, or a typical rough-contact pressure.
@@ -327,14 +404,13 @@ def solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance, max_iter
     inner = tolerance  # P0 is a guess: resolving its state any further is wasted
     points = []
     solution = initial
-    exhausted = False
     for outer in range(max_outer):
         budget = max_iterations - iterations  # the limit is per step, not per inner solve
         if budget < 1:
-            exhausted = True
-            break
-        solution = tao_solve(problem, Load(pressure), tao_type, inner, budget,
-                              solution, options, monitor)
+            return solution, iterations, history, True
+        solution = tao_solve(problem, Load(pressure), kind,
+                             settings.but(tolerance=inner, max_iterations=budget), solution,
+                             monitor)
         iterations += solution.iterations
         error = (solution.mean_gap - target) / h0
         history.append((pressure, solution.mean_gap))
@@ -342,8 +418,7 @@ def solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance, max_iter
         # that stopped short of a tighter inner tolerance (a line search lost in the
         # round-off of the energy) may still leave a state that meets the test, and
         # its mean gap is still the best the secant can have.
-        usable = _meets_kkt(solution, tolerance)
-        if not usable or abs(error) <= tolerance:
+        if not _meets_kkt(solution, tolerance) or abs(error) <= tolerance:
             break
         if len(history) >= 3 and history[-1][1] == history[-2][1] == history[-3][1]:
             break  # the inner solves no longer move the mean gap: reported as not converged
@@ -356,16 +431,7 @@ def solve_mean_gap_by_multiplier(problem, control, tao_type, tolerance, max_iter
         load = math.exp(min(max(log_p, points[-1][0] - 5.0), points[-1][0] + 5.0))
         pressure = load * ps
         inner = _inner_tolerance(tolerance, error, load, slope / h0)
-    usable = _meets_kkt(solution, tolerance)
-    converged = not exhausted and usable and abs((solution.mean_gap - target) / h0) <= tolerance
-    reason = "converged_kkt" if converged else "max_iterations" if exhausted else \
-        (solution.reason if not usable else "multiplier_not_converged")
-    result = problem.make_solution(
-        solution.gap, solution.pressure, solution.gap <= 0, control, converged=converged,
-        reason=reason, solver=f"{tao_type}+multiplier", iterations=iterations,
-        operator_applications=problem.operator_applications - start_ops, wall_time=timer(),
-        history=history)
-    return result
+    return solution, iterations, history, False
 
 
 def _meets_kkt(solution, tolerance):
@@ -385,8 +451,8 @@ def _inner_tolerance(tolerance, error, load, slope, forcing=0.5):
     tolerance h0``; and never above ``tolerance``, which the returned state must
     meet.  Compliant (lightly loaded) contact therefore asks for tighter inner
     solves than stiff contact.  The bound is pessimistic -- a residual bounded
-    in the max norm seldom has that size everywhere at once; measured mean-gap
-    errors were several times smaller -- which leaves margin for the secant.
+    in the max norm seldom has that size everywhere at once -- which leaves
+    margin for the secant.
 
     Parameters
     ----------
@@ -403,115 +469,150 @@ def _inner_tolerance(tolerance, error, load, slope, forcing=0.5):
     return min(tolerance, wanted)
 
 
-def solve_load_by_mean_gap(problem, control, tolerance, max_iterations, initial, options,
-                            monitor, max_outer=60):
+def solve_load_by_mean_gap(problem, control, kind, settings, initial=None, monitor=None,
+                           max_outer=60):
     """Adhesive load control: find the mean gap whose multiplier is the load.
 
     A safeguarded secant (regula falsi once the root is bracketed) on
-    ``P(g_bar) - P0`` with warm-started mean-gap solves.  ``P(g_bar)`` of an
-    adhesive interface need not be monotone; the branch found is the one
-    connected to the starting gap (the previous step of a sweep, else the
-    non-adhesive solution at the same load), and is reported in ``history``.
-    Every trial is warm-started from the last state on that branch; a trial in
-    which every contact has let go of the wall is not followed (adhesion is
-    hysteretic: a separated warm start never finds the contact again) but
-    bisected back towards the branch, down to ``1e-3 h0`` of mean gap: if the
-    branch ends there without carrying the load, that is pull-off, and the
-    separated state is returned with ``converged=False``.  Full contact
-    (``g_bar = 0``) carries every load that leaves no wall reaction tensile.
+    ``P(g_bar) - P0`` with warm-started mean-gap solves of type ``kind``
+    (:class:`_LoadSecant`).  ``P(g_bar)`` of an adhesive interface need not be
+    monotone; the branch found is the one connected to the starting gap (the
+    previous step of a sweep, else the non-adhesive solution at the same load,
+    :func:`_branch_start`), and is reported in ``history``.  Full contact
+    (``g_bar = 0``) carries every load that leaves no wall reaction tensile
+    (:func:`_carried_in_full_contact`).
     """
     timer = Timer()
     target = float(control.mean_pressure)
-    h0 = problem.gap_scale
+    tolerance, max_iterations = settings.tolerance, settings.max_iterations
     start_ops = problem.operator_applications
-    iterations = 0
-    if initial is not None:
-        gap_guess, state = initial.mean_gap, initial
-    else:
-        # the same surface against a hard wall; its applications count as this
-        # solve's (the half-space is shared)
-        hard = problem.with_interaction(None)
-        with petsc_options(options):
-            settings = pressure_solver_options()
-        seed = polonsky_keer(hard, Load(max(target, 1e-3 * problem.pressure_scale)),
-                             SolverSettings(tolerance=max(tolerance, 1e-6),
-                                            max_iterations=max_iterations,
-                                            edge_correction=settings["edge_correction"],
-                                            interaction_block=settings["interaction_block"],
-                                            coarse_tolerance=settings["coarse_tolerance"]))
-        iterations += seed.iterations
-        gap_guess, state = seed.mean_gap, seed
-    points, history = [], []
-    lo = hi = None  # brackets: (gap, P - P0) with opposite signs
-    solution = on_branch = state
-    negative_curvature = 0
-
-    def touching(s):
-        return problem.grid.comm.allreduce(int(np.count_nonzero(s.gap <= 0))) > 0
-    guard = touching(state)
-    release = None  # smallest mean gap tried at which every contact let go
-    exhausted = False
+    gap_guess, state, iterations = _branch_start(problem, target, settings, initial)
+    secant = _LoadSecant(problem, target, state)
+    solution, history, negative_curvature, exhausted = state, [], 0, False
     for outer in range(max_outer):
         budget = max_iterations - iterations  # the limit is per step, seed included
         if budget < 1:
             exhausted = True  # (the state is then a trial or the hard-wall seed)
             break
-        solution = tao_solve(problem, MeanGap(max(gap_guess, 0.0)), "pcg-gap", tolerance,
-                              budget, on_branch, options, monitor)
+        solution = tao_solve(problem, MeanGap(max(gap_guess, 0.0)), kind,
+                             settings.but(max_iterations=budget), secant.on_branch, monitor)
         iterations += solution.iterations
         negative_curvature += solution.negative_curvature_steps
         f = solution.mean_pressure - target
         history.append((solution.mean_gap, solution.mean_pressure))
         if not solution.converged or abs(f) <= tolerance * problem.pressure_scale:
             break
-        if solution.mean_gap == 0.0:
-            # Full contact (every gap at the wall): the mean gap cannot resolve the
-            # load any further, and this state carries every P0 at which no wall
-            # reaction is tensile, p_el + P0 + v'(0) >= 0 (adhesive jump-in).
-            p_el = solution.pressure - solution.mean_pressure
-            least = -problem.grid.comm.allreduce(
-                float(np.min(p_el + problem.interaction.derivative(0.0))), op=MPI.MIN)
-            if target >= least:
-                solution.pressure = p_el + target
-                solution.mean_pressure = problem.grid.mean(solution.pressure)
-                break
-        if guard and not touching(solution):
-            # off the branch (overshoot, or past its end): bisect back towards it
-            release = solution.mean_gap if release is None else min(release, solution.mean_gap)
-            if release - on_branch.mean_gap <= 1e-3 * h0:
-                break  # pull-off: the branch ends without carrying the load
-            gap_guess = 0.5 * (on_branch.mean_gap + release)
-            continue
-        on_branch = solution
-        points.append((solution.mean_gap, f))
-        if f > 0:
-            lo = (solution.mean_gap, f) if lo is None or solution.mean_gap > lo[0] else lo
-        else:
-            hi = (solution.mean_gap, f) if hi is None or solution.mean_gap < hi[0] else hi
-        if len(points) == 1:
-            # stiffness estimate of rough contact: dP/dg ~ -P / (0.5 h0)
-            slope = -max(abs(solution.mean_pressure), 1e-3 * problem.pressure_scale) / (0.5 * h0)
-        else:
-            (g1, f1), (g2, f2) = points[-2], points[-1]
-            slope = (f2 - f1) / (g2 - g1) if g2 != g1 else -problem.pressure_scale / h0
-        step = -f / slope if slope < 0 else (0.5 * h0 if f > 0 else -0.5 * h0)
-        gap_guess = solution.mean_gap + max(min(step, h0), -h0)
-        if lo is not None and hi is not None and not (min(lo[0], hi[0]) < gap_guess < max(lo[0], hi[0])):
-            # regula falsi inside the bracket
-            gap_guess = lo[0] - lo[1] * (hi[0] - lo[0]) / (hi[1] - lo[1])
-        if release is not None:
-            gap_guess = min(gap_guess, 0.5 * (solution.mean_gap + release))
+        if solution.mean_gap == 0.0 and _carried_in_full_contact(problem, solution, target):
+            break
+        gap_guess = secant.next_gap(solution, f)
+        if gap_guess is None:
+            break  # pull-off: the branch ends without carrying the load
     converged = not exhausted and solution.converged and \
         abs(solution.mean_pressure - target) <= tolerance * problem.pressure_scale
     reason = "converged_kkt" if converged else "max_iterations" if exhausted else \
         (solution.reason if not solution.converged else "load_not_reached")
     result = problem.make_solution(
         solution.gap, solution.pressure, solution.gap <= 0, control, converged=converged,
-        reason=reason, solver="pcg-gap+mean-gap-secant", iterations=iterations,
+        reason=reason, solver=f"{kind}+mean-gap-secant", iterations=iterations,
         operator_applications=problem.operator_applications - start_ops, wall_time=timer(),
         history=history)
     result.negative_curvature_steps = negative_curvature  # of all inner solves
     return result
+
+
+def _branch_start(problem, target, settings, initial):
+    """The mean gap to try first, the state it is on, and the iterations that cost.
+
+    A sweep's previous step; else the same surface against a hard wall at the same
+    load (at least ``1e-3 h0' E*``), whose operator applications count as this
+    solve's (the half-space is shared).
+    """
+    if initial is not None:
+        return initial.mean_gap, initial, 0
+    hard = problem.with_interaction(None)
+    seed = polonsky_keer(hard, Load(max(target, 1e-3 * problem.pressure_scale)),
+                         settings.but(tolerance=max(settings.tolerance, 1e-6)))
+    return seed.mean_gap, seed, seed.iterations
+
+
+def _carried_in_full_contact(problem, solution, target):
+    """Whether full contact carries the load ``target``; if so ``solution`` is set to it.
+
+    With every gap at the wall the mean gap cannot resolve the load any further, and
+    this state carries every ``P0`` at which no wall reaction is tensile,
+    ``p_el + P0 + v'(0) >= 0`` (adhesive jump-in).
+    """
+    p_el = solution.pressure - solution.mean_pressure
+    least = -problem.grid.comm.allreduce(
+        float(np.min(p_el + problem.interaction.derivative(0.0))), op=MPI.MIN)
+    if target < least:
+        return False
+    solution.pressure = p_el + target
+    solution.mean_pressure = problem.grid.mean(solution.pressure)
+    return True
+
+
+class _LoadSecant:
+    """The safeguarded secant of :func:`solve_load_by_mean_gap` on ``P(g_bar) - P0``.
+
+    Keeps the last state on the branch (the warm start of every trial), the points on
+    it, the bracket of the root once found, and the smallest mean gap at which every
+    contact let go.  A trial in which every contact has let go of the wall is not
+    followed (adhesion is hysteretic: a separated warm start never finds the contact
+    again) but bisected back towards the branch, down to ``1e-3 h0`` of mean gap: if
+    the branch ends there without carrying the load, that is pull-off, and the
+    separated state is returned with ``converged=False``.
+    """
+
+    def __init__(self, problem, target, state):
+        self.problem, self.target = problem, target
+        self.on_branch = state
+        self.points = []
+        self.lo = self.hi = None  # brackets: (gap, P - P0) with opposite signs
+        self.guard = self.touching(state)
+        self.release = None  # smallest mean gap tried at which every contact let go
+
+    def touching(self, state):
+        return self.problem.grid.comm.allreduce(int(np.count_nonzero(state.gap <= 0))) > 0
+
+    def next_gap(self, solution, f):
+        """The next mean gap to try after ``solution`` (``f = P - P0``), or None at pull-off."""
+        h0 = self.problem.gap_scale
+        if self.guard and not self.touching(solution):
+            # off the branch (overshoot, or past its end): bisect back towards it
+            self.release = solution.mean_gap if self.release is None \
+                else min(self.release, solution.mean_gap)
+            if self.release - self.on_branch.mean_gap <= 1e-3 * h0:
+                return None
+            return 0.5 * (self.on_branch.mean_gap + self.release)
+        self.on_branch = solution
+        self.points.append((solution.mean_gap, f))
+        if f > 0:
+            self.lo = (solution.mean_gap, f) if self.lo is None or solution.mean_gap > \
+                self.lo[0] else self.lo
+        else:
+            self.hi = (solution.mean_gap, f) if self.hi is None or solution.mean_gap < \
+                self.hi[0] else self.hi
+        gap_guess = solution.mean_gap + max(min(self._step(solution, f), h0), -h0)
+        lo, hi = self.lo, self.hi
+        if lo is not None and hi is not None and \
+                not (min(lo[0], hi[0]) < gap_guess < max(lo[0], hi[0])):
+            # regula falsi inside the bracket
+            gap_guess = lo[0] - lo[1] * (hi[0] - lo[0]) / (hi[1] - lo[1])
+        if self.release is not None:
+            gap_guess = min(gap_guess, 0.5 * (solution.mean_gap + self.release))
+        return gap_guess
+
+    def _step(self, solution, f):
+        """The secant's step in mean gap, before the safeguards."""
+        problem, h0 = self.problem, self.problem.gap_scale
+        if len(self.points) == 1:
+            # stiffness estimate of rough contact: dP/dg ~ -P / (0.5 h0)
+            slope = -max(abs(solution.mean_pressure), 1e-3 * problem.pressure_scale) / (0.5 * h0)
+        else:
+            (g1, f1), (g2, f2) = self.points[-2], self.points[-1]
+            slope = (f2 - f1) / (g2 - g1) if g2 != g1 else -problem.pressure_scale / h0
+        return -f / slope if slope < 0 else (0.5 * h0 if f > 0 else -0.5 * h0)
 
 
 class GapHessian:
@@ -552,52 +653,6 @@ class GapHessian:
         self.mult(mat, xv, yv)
 
 
-class petsc_options:
-    """Push PETSc options for the duration of a ``with`` block, then restore them."""
-
-    def __init__(self, options):
-        self.options = {str(k).lstrip("-"): ("" if v is None else str(v))
-                        for k, v in (options or {}).items()}
-        self.saved = {}
-
-    def __enter__(self):
-        db = PETSc.Options()
-        for key, value in self.options.items():
-            self.saved[key] = db.getString(key, None) if db.hasName(key) else None
-            db.setValue(key, value)
-        return db
-
-    def __exit__(self, *exc):
-        db = PETSc.Options()
-        for key, old in self.saved.items():
-            if old is None:
-                db.delValue(key)
-            else:
-                db.setValue(key, old)
-        return False
-
-
-def pressure_solver_options():
-    """petgap's own options of :func:`~petgap.solvers.pressure_cg.polonsky_keer`, as its keywords.
-
-    ``-petgap_coarse_start`` (default true), ``-petgap_coarse_tolerance``
-    (default :data:`~petgap.solvers.coarse.COARSE_TOLERANCE`), ``-petgap_edge_correction``
-    (default :data:`~petgap.solvers.edge_correction.EDGE_CORRECTION`) and
-    ``-petgap_interaction_block`` (default
-    :data:`~petgap.solvers.patch_interaction.BLOCK`, 0 leaves the patch
-    interaction out) and ``-petgap_search_precision`` (``single`` or ``double``;
-    only where given, so that each solver keeps its own default), read from
-    PETSc's database as it is: call it inside the solve's :class:`petsc_options`.
-    """
-    db = PETSc.Options()
-    return {"coarse_start": db.getBool("petgap_coarse_start", True),
-            "coarse_tolerance": db.getReal("petgap_coarse_tolerance", COARSE_TOLERANCE),
-            "edge_correction": db.getReal("petgap_edge_correction", EDGE_CORRECTION),
-            "interaction_block": db.getInt("petgap_interaction_block", BLOCK),
-            **({"search_precision": db.getString("petgap_search_precision")}
-               if db.hasName("petgap_search_precision") else {})}
-
-
 # ------------------------------------------------------------- option checking
 #: The PETSc options a petgap run reads, with the kind of value each takes:
 #: ``"int"``, ``"real"``, ``"bool"`` (a bare flag is true), ``"word"`` (any
@@ -621,10 +676,8 @@ KNOWN_OPTIONS = {
     "tao_view_ls_residual": "viewer", "tao_recycle_history": "bool", "tao_mf_hessian": "bool",
     "tao_fd_gradient": "bool", "tao_fd_hessian": "bool", "tao_subset_type": "word",
     "tao_ls_type": "word",
-    # petgap's own
-    "petgap_coarse_start": "bool", "petgap_coarse_tolerance": "real",
-    "petgap_edge_correction": "real",
-    "petgap_interaction_block": "int", "petgap_search_precision": "precision",
+    # petgap's own (the settings of petgap.solvers.settings.read_settings)
+    **{name: kind for name, (_, kind) in PETGAP_OPTIONS.items()},
     # PETSc at large (profiling, debugging), read at initialisation or finalisation
     "log_view": "viewer", "log_view_memory": "bool", "log_all": "bool", "log_trace": "viewer",
     "log_exclude": "word", "options_left": "bool", "options_view": "viewer",

@@ -3,7 +3,7 @@
 petgap reads its own interchange formats (``.npy``, HDF5) slab by slab
 (:mod:`petgap.surfaces.topography`); every other file goes to SurfaceTopography
 (ContactEngineering's reader library, https://github.com/ContactEngineering/SurfaceTopography),
-which detects the format from the content and knows the instruments' metadata: the
+which reads the format the extension names and knows the instruments' metadata: the
 physical size of the map and the unit of its heights.  Formats read and tested here
 (tests/surfaces/test_measured.py): Igor binary waves (``.ibw``), WSxM (``.top``),
 netCDF as SurfaceTopography writes it (``.nc``), MATLAB (``.mat``), plain-text height
@@ -15,9 +15,27 @@ A map is read whole on rank 0 (instrument files are small next to a solve:
 a 4096^2 map is 128 MiB), conditioned there with SurfaceTopography's own methods
 (undefined points filled, trend removed, heights in the requested unit) and handed
 to each rank as its slab.  Errors are decided on rank 0 and raised on every rank.
+
+A file's extension chooses the readers tried: the readers SurfaceTopography lists for
+it (any of its text readers for a text file), so that a file whose content is not what
+its name says is refused with both named, rather than read by another reader that
+accepts anything (SurfaceTopography's SRTM reader takes any file of ``2 n^2`` bytes as
+an ``n x n`` map); a file whose extension no reader claims is detected by content among
+the readers that check a signature.  Every error leads with the file and the reason.
+
+Third-party readers must not hang a run.  Two bounds see to it: a file that starts as a
+WSxM file must hold its header's ``[Header end]`` line (SurfaceTopography's WSxM reader
+reads header lines until it meets that one, and at the end of a file cut inside its
+header reads empty lines forever), and every call into SurfaceTopography runs under a
+time limit (:func:`time_bound`) that interrupts the reader where it loops in Python.
 """
+import _thread
 import contextlib
 import io
+import math
+import os
+import signal
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -78,22 +96,177 @@ def condition_map(heights, path, *, detrend="none", undefined="refuse"):
     if heights.ndim != 2 or heights.dtype.kind != "f":
         raise ValueError(f"topography {path} holds a {heights.ndim}D {heights.dtype} array; "
                          f"a topography is a 2D floating-point array")
+    check_map_shape(path, heights.shape)
     topography = surface_topography().Topography(np.ma.masked_invalid(heights),
                                                  tuple(float(n) for n in heights.shape))
     return _condition(path, topography, "petgap", "(the array)", None, detrend, undefined,
                       None)
 
 
-def _open_channel(path, channel):
-    """SurfaceTopography's reader of ``path`` and its 2D data channel (by name, or the
-    file's default); ValueError naming the file otherwise."""
+def check_file(path):
+    """Raise unless ``path`` is a regular file with content: FileNotFoundError, or a
+    ValueError naming it (a directory, an empty file)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"topography file {path} does not exist")
+    if not path.is_file():
+        raise ValueError(f"topography path {path} is not a file")
+    if path.stat().st_size == 0:
+        raise ValueError(f"topography file {path} is empty (0 bytes)")
+
+
+#: The fewest points along each axis of a map: one row or column is a line scan.
+MIN_POINTS = 2
+
+
+def check_map_shape(what, shape):
+    """Raise a ValueError naming ``what`` unless ``shape`` is a map: 2D, at least
+    :data:`MIN_POINTS` points along each axis (whatever the number of ranks)."""
+    if len(shape) == 2 and min(shape) < MIN_POINTS:
+        raise ValueError(f"topography {what} has {shape[0]} x {shape[1]} points: a line scan "
+                         f"(or nothing), not a map; allowed: at least {MIN_POINTS} points along "
+                         f"x and along y")
+
+
+#: A call into SurfaceTopography may take :data:`READ_SECONDS` plus
+#: :data:`READ_SECONDS_PER_MIB` per MiB of the file before it is interrupted: a slow
+#: disk and a text reader parsing a large map stay well inside it, a reader looping
+#: at the end of a file does not.
+READ_SECONDS = 60.0
+READ_SECONDS_PER_MIB = 2.0
+
+
+class _Overtime(BaseException):
+    """Raised in the main thread by :func:`time_bound`'s timer; not an Exception, so that
+    a reader's ``except Exception`` (format detection tries one reader after another)
+    does not swallow it."""
+
+
+@contextlib.contextmanager
+def time_bound(path, what="SurfaceTopography's reader"):
+    """Interrupt the block (a call into a third-party reader of ``path``) when it runs
+    longer than its limit (:data:`READ_SECONDS`, :data:`READ_SECONDS_PER_MIB`); a
+    ValueError naming the file then.
+
+    A timer thread simulates a signal in the main thread (``_thread.interrupt_main``;
+    no signal reaches the process, so MPI's threads are not disturbed), whose handler
+    raises where the reader is, at its next Python instruction: a loop in Python (as the
+    WSxM reader's) is stopped, a single long call into C is not.  Off the main thread no
+    signal handler can be set, and the block runs unbounded.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    seconds = READ_SECONDS + READ_SECONDS_PER_MIB * os.path.getsize(path) / 2**20
+    state = {"done": False, "fired": False}
+
+    def fire():
+        state["fired"] = True
+        _thread.interrupt_main(signal.SIGALRM)
+
+    def interrupt(signum, frame):
+        if state["fired"] and not state["done"]:
+            raise _Overtime
+        if callable(old):   # a real SIGALRM, meant for whoever handled it before
+            old(signum, frame)
+
+    old = signal.signal(signal.SIGALRM, interrupt)
+    timer = threading.Timer(seconds, fire)
+    timer.daemon = True
+    timer.start()
     try:
         with contextlib.redirect_stdout(io.StringIO()):
-            reader = surface_topography().open_topography(str(path))
-    except Exception as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ValueError(f"cannot read topography {path}: SurfaceTopography does not recognise "
-                         f"its format ({first})") from None
+            yield
+    except _Overtime:
+        raise ValueError(f"topography file {path}: {what} did not finish within {seconds:.3g} s "
+                         f"and was stopped (a damaged or cut file makes some readers loop); "
+                         f"check the file, or convert it to .npy or HDF5") from None
+    finally:
+        state["done"] = True
+        timer.cancel()
+        signal.signal(signal.SIGALRM, old)
+
+
+#: SurfaceTopography's text readers (by format): a text file may be any of them.
+TEXT_FORMATS = ("xyz", "asc")
+#: Formats never tried unless the extension names them: SRTM height files have no
+#: signature, and the reader takes any file of ``2 n^2`` bytes as an ``n x n`` map.
+UNSIGNED_FORMATS = ("hgt",)
+
+
+def readers_for(path):
+    """The SurfaceTopography readers to try on ``path``, in SurfaceTopography's order,
+    and whether its extension chose them (module docstring)."""
+    readers = surface_topography().IO.readers
+    suffix = Path(path).suffix.lower().lstrip(".")
+    claim = {r.format() for r in readers if suffix in getattr(r, "_file_extensions", ())}
+    if claim & set(TEXT_FORMATS):
+        claim |= set(TEXT_FORMATS)
+    if claim:
+        return [r for r in readers if r.format() in claim], True
+    return [r for r in readers if r.format() not in UNSIGNED_FORMATS], False
+
+
+#: First line of a WSxM file, and the line that ends its header.
+WSXM_SIGNATURE, WSXM_HEADER_END = b"WSxM file copyright", b"[Header end]"
+
+
+def check_wsxm_header(path, limit=1 << 20):
+    """Raise a ValueError naming ``path`` if it starts as a WSxM file but its header
+    has no ``[Header end]`` line (within the header size it states, or ``limit``
+    bytes): SurfaceTopography's WSxM reader would read empty lines forever."""
+    with open(path, "rb") as f:
+        if f.read(len(WSXM_SIGNATURE)) != WSXM_SIGNATURE:
+            return
+        f.seek(0)
+        head = f.read(limit)
+    lines = head.splitlines()
+    stated = None
+    if len(lines) > 2 and lines[2].startswith(b"Image header size:"):
+        try:
+            stated = int(lines[2].split(b":", 1)[1])
+        except ValueError:
+            pass
+    within = head if stated is None else head[:max(stated, 0)]
+    if WSXM_HEADER_END not in [line.strip() for line in within.splitlines()]:
+        says = "" if stated is None else f", of the {stated} its header states"
+        raise ValueError(f"topography file {path}: a WSxM file cut inside its header (no "
+                         f"[Header end] line in its {len(within)} bytes{says}); the file is "
+                         f"truncated or damaged")
+
+
+def _first_line(exc):
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _open_reader(path):
+    """The first of :func:`readers_for` that accepts ``path``; ValueError naming the file
+    and, if its extension chose the readers, what the extension says."""
+    check_wsxm_header(path)
+    candidates, by_extension = readers_for(path)
+    failures = []
+    with time_bound(path):
+        for reader in candidates:
+            try:
+                return reader(str(path))
+            except Exception as exc:
+                failures.append(f"{reader.__name__}: {_first_line(exc)}")
+    if by_extension:
+        names = " or ".join(dict.fromkeys(r._name for r in candidates))
+        raise ValueError(f"topography file {path}: its extension {Path(path).suffix} says "
+                         f"{names}, but the content is not: SurfaceTopography does not "
+                         f"recognise its format ({'; '.join(failures)})")
+    raise ValueError(f"topography file {path}: SurfaceTopography does not recognise its "
+                     f"format (no reader claims the extension {Path(path).suffix or '(none)'}, "
+                     f"and none of them recognises the content)")
+
+
+def _open_channel(path, channel):
+    """SurfaceTopography's reader of ``path`` and its 2D data channel (by name, or the
+    file's default), checked (:func:`check_channel`); ValueError naming the file otherwise."""
+    check_file(path)
+    reader = _open_reader(path)
     names = [c.name for c in reader.channels]
     if channel is not None and channel not in names:
         raise ValueError(f"topography {path} has no channel {channel!r}; channels: "
@@ -102,7 +275,28 @@ def _open_channel(path, channel):
     if chosen.dim != 2:
         raise ValueError(f"topography {path} (channel {chosen.name!r}) is a line scan with "
                          f"{chosen.nb_grid_pts} points; petgap needs a 2D map")
+    check_channel(path, chosen)
     return reader, chosen
+
+
+def check_channel(path, channel):
+    """What a reader's header says about a 2D channel, checked before its data are read: a
+    map (:func:`check_map_shape`), a positive finite physical size, and as many bytes in
+    the file as the header promises where the reader says where its data start."""
+    check_map_shape(path, tuple(channel.nb_grid_pts))
+    sizes = channel.physical_sizes
+    if sizes is not None and not all(math.isfinite(float(v)) and float(v) > 0 for v in sizes):
+        raise ValueError(f"topography file {path}: its header gives the physical size "
+                         f"{' x '.join(f'{float(v):g}' for v in sizes)} {channel.unit or ''}; "
+                         f"allowed: a size > 0 and finite along x and y (a damaged header?)")
+    tags = getattr(channel, "tags", None) or {}
+    if "file_offset" in tags and "dtype" in tags:
+        need = int(np.prod(channel.nb_grid_pts)) * np.dtype(tags["dtype"]).itemsize
+        held = os.path.getsize(path) - int(tags["file_offset"])
+        if held < need:
+            raise ValueError(f"topography file {path} is truncated: its header promises "
+                             f"{channel.nb_grid_pts[0]} x {channel.nb_grid_pts[1]} heights "
+                             f"({need} bytes), the file holds {max(held, 0)} bytes of data")
 
 
 def read_measured(path, *, channel=None, unit=None, detrend="none", undefined="refuse"):
@@ -114,8 +308,8 @@ def read_measured(path, *, channel=None, unit=None, detrend="none", undefined="r
     channel : str, optional
         The data channel (by name) of a file with several; default: the file's default.
     unit : str, optional
-        Length unit wanted (``"um"``, ``"nm"``, ...): heights and sizes are converted
-        from the file's unit.  ``None`` keeps the file's.
+        Length unit wanted (``"um"``, ``"nm"``, ...; a scene's ``units.length``): heights
+        and sizes are converted from the file's unit.  ``None`` keeps the file's.
     detrend : str
         One of :data:`DETRENDS`: remove the mean (``center``), a plane (``height``: least
         squares; ``slope``: the mean slope) or a quadratic surface (``curvature``).
@@ -126,25 +320,27 @@ def read_measured(path, *, channel=None, unit=None, detrend="none", undefined="r
     Raises
     ------
     ValueError
-        The format is not recognised, the file is a line scan, the channel does not
-        exist, the map has undefined points (with ``refuse``), a unit cannot be
-        converted; the message names the file and what is allowed.
+        The file is empty, cut or damaged, its format is not recognised (or not the one
+        its extension says), it is a line scan, the channel does not exist, the map has
+        undefined points (with ``refuse``) or no defined point, a unit cannot be
+        converted; the message leads with the file and says what is allowed.
     """
     if detrend not in DETRENDS:
         raise ValueError(f"detrend = {detrend!r} is not allowed; allowed: {', '.join(DETRENDS)}")
     if undefined not in UNDEFINED:
         raise ValueError(f"undefined = {undefined!r} is not allowed; allowed: "
                          f"{', '.join(UNDEFINED)}")
-    if not Path(path).exists():
-        raise FileNotFoundError(f"topography file {path} does not exist")
-    if not Path(path).is_file():
-        raise ValueError(f"topography path {path} is not a file")
     reader, chosen = _open_channel(path, channel)
     sizes = chosen.physical_sizes
     kwargs = {} if sizes is not None else {"physical_sizes": tuple(float(n) for n in
                                                                    chosen.nb_grid_pts)}
-    with contextlib.redirect_stdout(io.StringIO()):
-        topography = reader.topography(channel_index=chosen.index, **kwargs)
+    with time_bound(path):
+        try:
+            topography = reader.topography(channel_index=chosen.index, **kwargs)
+        except Exception as exc:
+            raise ValueError(f"topography file {path}: SurfaceTopography cannot read its "
+                             f"heights ({type(exc).__name__}: {_first_line(exc)}); the file "
+                             f"is truncated or damaged") from None
     return _condition(path, topography, type(reader).__name__, str(chosen.name), unit,
                       detrend, undefined, sizes)
 
@@ -153,6 +349,9 @@ def _condition(path, topography, reader, channel, unit, detrend, undefined, size
     """Fill, convert and detrend a read topography; its :class:`Measurement`."""
     missing = int(np.count_nonzero(np.ma.getmaskarray(topography.heights()))) \
         if topography.has_undefined_data else 0
+    if missing and missing == int(np.prod(topography.nb_grid_pts)):
+        raise ValueError(f"topography {path}: every point is undefined (all {missing} are NaN "
+                         f"or masked): there is no map to solve, nor anything to fill from")
     if missing and undefined == "refuse":
         raise ValueError(f"topography {path} has {missing} undefined points (NaN or masked); "
                          f"set surface.undefined = \"harmonic\" to fill them, or fill them "
@@ -161,12 +360,8 @@ def _condition(path, topography, reader, channel, unit, detrend, undefined, size
         topography = topography.interpolate_undefined_data("harmonic")
     file_unit = topography.unit
     if unit is not None and file_unit is not None and unit != file_unit:
-        try:
-            topography = topography.to_unit(unit)
-            topography.heights()        # the conversion is lazy: make it fail here
-        except Exception as exc:
-            raise ValueError(f"topography {path}: cannot convert its unit {file_unit!r} to "
-                             f"{unit!r}: {exc}") from None
+        conversion_factor(path, file_unit, unit)
+        topography = topography.to_unit(unit)
     if detrend != "none":
         topography = topography.detrend(detrend_mode=detrend)
     heights = np.ma.getdata(topography.heights()).astype(np.float64, copy=True)
@@ -177,22 +372,36 @@ def _condition(path, topography, reader, channel, unit, detrend, undefined, size
                        reader=reader, channel=channel, undefined=missing)
 
 
+def conversion_factor(path, file_unit, unit):
+    """The factor from the file's length unit to ``unit`` (the scene's ``units.length``);
+    a ValueError naming the file, both units and which one is the problem otherwise."""
+    # deferred: with the package
+    from SurfaceTopography.Support.UnitConversion import get_unit_conversion_factor, length_units
+    try:
+        return get_unit_conversion_factor(file_unit, unit)
+    except Exception as exc:
+        known = ", ".join(u for u in length_units if u != "µm")
+        culprit = (f"units.length = {unit!r} is not a length unit SurfaceTopography knows"
+                   if unit not in length_units and file_unit in length_units else
+                   f"the file's unit {file_unit!r} is not a length (a height channel? "
+                   f"surface.channel chooses another)")
+        raise ValueError(f"topography {path}: cannot convert its unit {file_unit!r} to {unit!r} "
+                         f"(units.length): {culprit} ({_first_line(exc)}); allowed: "
+                         f"{known}, or units.length = \"1\" to keep the file's numbers") from None
+
+
 def read_header(path, channel=None, unit=None):
     """Shape, physical size and unit of a measured map, without its heights (calling rank).
 
     ``{"shape": (nx, ny), "size": (Lx, Ly) or None, "unit": str or None, "periodic":
     bool}``; the size is converted to ``unit`` when the file and ``unit`` both name one;
-    ``periodic`` is the file's own say (instrument maps are not, as a rule).
+    ``periodic`` is the file's own say (instrument maps are not, as a rule).  Raises what
+    :func:`read_measured` raises about the file's header.
     """
     _, chosen = _open_channel(path, channel)
     size, file_unit = chosen.physical_sizes, chosen.unit
     if size is not None and unit is not None and file_unit is not None and unit != file_unit:
-        from SurfaceTopography.Support.UnitConversion import get_unit_conversion_factor  # deferred: with the package
-        try:
-            factor = get_unit_conversion_factor(file_unit, unit)
-        except Exception as exc:
-            raise ValueError(f"topography {path}: cannot convert its unit {file_unit!r} to "
-                             f"{unit!r}: {exc}") from None
+        factor = conversion_factor(path, file_unit, unit)
         size, file_unit = tuple(factor * float(v) for v in size), unit
     return {"shape": tuple(int(n) for n in chosen.nb_grid_pts),
             "size": None if size is None else tuple(float(v) for v in size), "unit": file_unit,

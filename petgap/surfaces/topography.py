@@ -19,7 +19,8 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.parallel.collective import root_decides
-from petgap.surfaces.measured import condition_map, read_header, read_measured, scatter_rows
+from petgap.surfaces.measured import (check_file, check_map_shape, condition_map, read_header,
+                                      read_measured, scatter_rows)
 from petgap.surfaces.statistics import check_local_field
 
 #: File name extensions load_topography reads itself, slab by slab (others go to
@@ -236,10 +237,7 @@ def save_topography_npy(grid, h_local, path):
 # --------------------------------------------------------------------- helpers
 def _inspect(path, dataset, shape):
     """Rank 0: check ``path`` without reading its data; return ``(kind, dataset name)``."""
-    if not path.exists():
-        raise FileNotFoundError(f"topography file {path} does not exist")
-    if not path.is_file():
-        raise ValueError(f"topography path {path} is not a file")
+    check_file(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:
         raise ValueError(f"topography file {path} has the unknown extension {path.suffix!r}; "
@@ -272,6 +270,7 @@ def _check_layout(what, file_shape, dtype, shape):
     if len(file_shape) != 2:
         raise ValueError(f"topography {what} is {len(file_shape)}D with shape {tuple(file_shape)}; "
                          f"a topography must be 2D, shape (nx, ny)")
+    check_map_shape(what, tuple(file_shape))
     if np.dtype(dtype).kind != "f":
         raise ValueError(f"topography {what} has data type {np.dtype(dtype)}, which is not "
                          f"floating point; heights must be float16, float32 or float64")

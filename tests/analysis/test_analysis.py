@@ -16,7 +16,7 @@ from mpi4py import MPI
 from petgap import analysis
 from petgap.parallel.grid import Grid
 from petgap.io.results import ResultFile
-from petgap.mechanics.interactions import ExponentialAdhesion
+from petgap.mechanics.interactions import ExponentialAdhesion, MaugisDugdaleAdhesion
 
 E_STAR = 1.0
 
@@ -625,6 +625,39 @@ def test_post_cli_tables_and_figures(comm, mpi_tmp_path, run_cli):
     ref_doc = json.loads((other / "gap-analysis.json").read_text())
     assert [r["step"] for r in ref_doc["rows"]] == [1]
     assert ref_doc["fig3_references"][0]["step"] == 0
+
+
+def test_post_rebuilds_any_law_from_its_attributes(comm, mpi_tmp_path, run_cli):
+    """A step solved with another law (Maugis-Dugdale): petgap-post rebuilds it from the
+    step's ``interaction.*`` attributes and measures ``F_att`` (Eq. 15) with its ``v'``;
+    Eq. 16 and Fig. 4's closed forms are the exponential law's, so they are left out.
+    An unknown kind is an error naming the kinds there are."""
+    shape = (48, 40)
+    g, p = _discs(shape, [((20.3, 18.2), 6.0, 30.0)])
+    w, delta = 2e-3, 0.5
+    law = MaugisDugdaleAdhesion(w, delta)
+    ga, pa = g, p - law.derivative(g) * (g > 0)
+    run, unknown = mpi_tmp_path / "dugdale.h5", mpi_tmp_path / "unknown.h5"
+    grid = _write_run(comm, run, shape, [({"gap": ga, "pressure": pa},
+                                          {"interaction": law.attributes()})])
+    _write_run(comm, unknown, shape, [({"gap": ga, "pressure": pa},
+                                       {"interaction": {"kind": "dugdale"}})])
+    proc = run_cli(["petgap-post", run, "-o", mpi_tmp_path / "post", "-q"], ranks=1)
+    bad = run_cli(["petgap-post", unknown, "-o", mpi_tmp_path / "bad", "-q"], ranks=1)
+    gal, pal = local(grid, ga, pa)
+    force = analysis.attractive_force_measured(grid, gal, law, pal)
+
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((mpi_tmp_path / "post" / "gap-analysis.json").read_text())
+    (row,) = doc["rows"]
+    assert row["interaction"] == "maugis-dugdale"
+    assert (row["work_of_adhesion"], row["range"]) == (w, delta)
+    assert row["F_att"] == pytest.approx(force.force, rel=1e-12) and force.force < 0
+    assert row["F_att_eq16_exact"] is None and row["F_att_eq16_printed"] is None
+    assert doc["force_by_gap"][0]["rho_over_g0"] is None
+    assert bad.returncode == 2
+    assert "interaction.kind = 'dugdale' is not known to petgap-post (hard-wall, " \
+           "exponential, maugis-dugdale, lennard-jones-9-3, squared-exponential)" in bad.stderr
 
 
 def test_post_cli_errors(comm, mpi_tmp_path, run_cli):

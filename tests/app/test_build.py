@@ -12,7 +12,7 @@ from mpi4py import MPI
 from petgap.app import protocol
 from petgap.app.build import Model, build, load_scene, petsc_options_dict
 from petgap.io.scene import Scene, SceneError
-from petgap.mechanics.interactions import ExponentialAdhesion, HardWall
+from petgap.mechanics.interactions import LAWS, ExponentialAdhesion, HardWall
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.solvers.sweeps import SweepStep
 
@@ -101,6 +101,21 @@ def test_protocol_scene_builds_both_problems_and_chains(comm):
     class Found:
         mean_gap = 0.25
     assert steps[3].control([None, Found()]) == MeanGap(0.25)
+
+
+@pytest.mark.parametrize("kind", [k for k in LAWS if k not in ("hard-wall", "exponential")])
+def test_every_law_of_the_registry_builds_from_its_scene(comm, kind):
+    """A scene names any law of the registry; the builder makes it and judges its resolution
+    in its own terms (the range is 2 pixels, the process zone E* w / sigma0^2 > 2 pixels)."""
+    scene = Scene.from_dict(dict(PROTOCOL, interaction=dict(PROTOCOL["interaction"], kind=kind,
+                                                            resolution_check="warn")), comm)
+    model = build(scene, comm)
+    assert type(model.interaction) is LAWS[kind]
+    assert (model.interaction.work, model.interaction.range) == (2e-4, 1.0)
+    assert model.adhesive_problem.interaction is model.interaction
+    assert model.resolution["resolved"], model.resolution["message"]
+    assert f"{model.interaction.LENGTH} = 2 a0" in model.resolution["message"]
+    assert [s.adhesive for s in model.steps] == [False, False, True, True]
 
 
 def test_surface_only_scene_builds_no_problem(comm):

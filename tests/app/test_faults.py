@@ -360,7 +360,7 @@ def _bad_input_cases(d):
                                               'resolution_check = "error"\n\n[control]'),
          ["interaction not resolved by the grid", "range rho = 0.2 is 0.2 pixels"]),
         ("negative-load", SMALL.replace("0.002, 0.004", "0.002, -0.004"),
-         ["control.values", "load <= 0 with a hard-wall interaction"]),
+         ["control.values", "item 1 (-0.004) is tensile", 'interaction.kind = "hard-wall"']),
         ("topography-nan", FILE_SCENE.format(path="nan.npy", extra=""),
          ["nan.npy", "non-finite", "(3, 5)"]),
         ("topography-inf", FILE_SCENE.format(path="inf.npy", extra=""),
@@ -744,3 +744,236 @@ def test_file_of_a_job_killed_while_creating_it_is_started_again(comm, shared):
     assert "error" not in result and result["attrs"]["complete"] is True
     assert sorted(result["steps"]) == [0, 1] and result["incomplete"] == []
     assert not wait_for_root((d / ".r.h5.partial").exists)
+
+
+# ------------------------------------------- instrument files, geometry, check = run
+def wsxm(columns=16, rows=16, width="160 nm", cut_header=None, cut_data=None):
+    """A small WSxM ``.top`` file (float64 heights), whole or cut at a byte of its header
+    or of its data."""
+    body = "\r\n".join([
+        "[Control]", f"    X Amplitude: {width}", "    Y Amplitude: 160 nm",
+        "[General Info]", "    Acquisition time: 03/11/2011, 20:23:46.484",
+        "    Image Data Type: double", f"    Number of columns: {columns}",
+        f"    Number of rows: {rows}", "    Z Amplitude: 2 nm",
+        "[Miscellaneous]", "    Maximum: 1", "    Minimum: -1", "", "[Header end]", ""])
+    start = "WSxM file copyright Nanotec Electronica\r\nSxM Image file\r\n"
+    size = len(start) + len("Image header size: 0000\r\n") + len(body)
+    header = f"{start}Image header size: {size:04d}\r\n{body}".encode("latin-1")
+    data = np.random.default_rng(4).uniform(-1, 1, (rows, columns)).astype("<f8").tobytes()
+    if cut_header is not None:
+        return header[:cut_header]
+    return header + data[:cut_data]
+
+
+def text_map(width):
+    """A 16 x 16 text map whose header gives ``width``."""
+    rows = np.random.default_rng(5).standard_normal((16, 16))
+    return (f"# Width: {width}\n# Height: 1 m\n# Value units: m\n"
+            + "\n".join(" ".join(f"{v:.6g}" for v in row) for row in rows) + "\n")
+
+
+#: name: (file written, its bytes or a writer, extra surface keys, fragments of the error);
+#: every error must also lead with the file (after the scene's name).
+INSTRUMENT_FILES = {
+    "cut-header": ("cut.top", wsxm(cut_header=200), "",
+                   ["cut inside its header", "no [Header end] line"]),
+    "zero-size-top": ("zero.top", wsxm(width="0 nm"), "", ["physical size 0 x 160 nm"]),
+    "zero-width-text": ("zero.txt", text_map("0 m").encode(), "", ["physical size 0 x 1 m"]),
+    "empty-text": ("empty.txt", b"", "", ["is empty (0 bytes)"]),
+    "truncated-top": ("truncated.top", wsxm(cut_data=1001), "",
+                      ["is truncated", "16 x 16 heights (2048 bytes)", "holds 1001 bytes"]),
+    "negative-width": ("negative.txt", text_map("-1 m").encode(), "",
+                       ["physical size -1 x 1 m", "allowed: a size > 0"]),
+    "not-igor": ("random.ibw", np.random.default_rng(6).bytes(800), "",
+                 ["extension .ibw says Igor binary wave", "not recognise its format"]),
+    "one-line": ("line.npy", lambda p: np.save(p, np.ones((64, 1))), "",
+                 ["64 x 1 points", "line scan", "at least 2 points along x and along y"]),
+    "all-undefined": ("nan.npy", lambda p: np.save(p, np.full((16, 16), np.nan)),
+                      'undefined = "harmonic"\n', ["every point is undefined", "256"]),
+    "empty-npy": ("empty.npy", b"", "", ["is empty (0 bytes)"]),
+    "unknown-unit": ("good.top", wsxm(), "", ["units.length", "'furlong'", "'nm'"]),
+}
+
+#: A file scene that takes its grid from the file.
+MEASURED_SCENE = FILE_SCENE.replace("\n[grid]\nnx = 32\n", "")
+
+
+def _instrument_cases(d, commands=("check", "run")):
+    """Write the files of :data:`INSTRUMENT_FILES` and a scene of each per command (each
+    job's own, so that its command line names it alone), on rank 0; the scenes' paths."""
+    scenes = {}
+    for name, (file, content, extra, _) in INSTRUMENT_FILES.items():
+        if callable(content):
+            content(d / file)
+        else:
+            (d / file).write_bytes(content)
+        if name == "unknown-unit":
+            extra += '\n[units]\nlength = "furlong"\n'
+        for command in commands:
+            scenes[name, command] = d / f"{name}-{command}.toml"
+            scenes[name, command].write_text(MEASURED_SCENE.format(path=file, extra=extra))
+    return scenes
+
+
+def _refused(proc, scene, fragments, leading=None):
+    """The problems of a job that should have ended in one clean error (an empty list)."""
+    err = proc["stderr"]
+    problems = []
+    if proc["hung"] or proc["returncode"] != 2 or err.count("petgap: error:") != 1 \
+            or "Traceback" in err or proc["leftovers"]:
+        problems.append(f"exit {proc['returncode']}, hung {proc['hung']}, "
+                        f"left {proc['leftovers']}")
+    problems += [f"missing {f!r}" for f in fragments if f not in err]
+    line = err.split("petgap: error: ", 1)[-1].removeprefix(f"{scene}: ")
+    if leading is not None and not line.startswith((f"topography {leading}",
+                                                    f"topography file {leading}")):
+        problems.append(f"does not lead with the file {leading}")
+    if "is missing" in line:
+        problems.append("framed as a missing key")
+    return [f"{p}:\n{err[-1500:]}" for p in problems]
+
+
+def test_bad_instrument_files_are_refused_naming_the_file(comm, shared):
+    """Cut, truncated, empty and mislabelled instrument files, zero and negative sizes, a
+    line scan, a map without a defined point, a unit SurfaceTopography cannot convert:
+    ``petgap check`` and ``petgap run`` each end within seconds -- no reader may loop --
+    in one error on every rank that leads with the file and says what is wrong with it
+    (naming units.length for the unit), and make no result."""
+    d = shared / "instrument"
+    scenes = wait_for_root(lambda: (d.mkdir(), _instrument_cases(d))[1])
+    jobs = [(_mpirun(["petgap", command, scene] + (["-o", d / f"{name}.h5"]
+                                                   if command == "run" else [])), scene)
+            for (name, command), scene in scenes.items()]
+    # the readers' own time limit is a minute: a job still running at 45 s hangs
+    outcomes = run_many(jobs, timeout=45)
+    problems = []
+    for ((name, command), scene), proc in zip(scenes.items(), outcomes):
+        file, _, _, fragments = INSTRUMENT_FILES[name]
+        problems += [f"{name} ({command}): {p}" for p in
+                     _refused(proc, scene, fragments, d / file)]
+    made = wait_for_root(lambda: sorted(p.name for p in d.glob("*.h5")))
+    assert not problems and made == [], "\n".join(problems) + f"\nmade: {made}"
+
+
+def test_a_line_scan_is_refused_alike_on_any_number_of_ranks(comm, shared):
+    """A 64 x 1 map is refused as a line scan, in the same words on one rank and on two
+    (not as a decomposition that fewer ranks would fix)."""
+    d = shared / "line-ranks"
+    scenes = wait_for_root(lambda: (d.mkdir(), _instrument_cases(d, ("run",)))[1])
+    scene = scenes["one-line", "run"]
+    outcomes = run_many([(_mpirun(["petgap", "run", scene, "-o", d / f"{n}.h5"], ranks=n),
+                          d / f"{n}.h5") for n in (1, 2)])
+    one, two = (o["stderr"].split("petgap: error: ", 1)[-1].splitlines()[0] for o in outcomes)
+    for proc in outcomes:
+        assert not _refused(proc, scene, ["line scan"], d / "line.npy"), proc["stderr"]
+    assert one == two and "cannot be split" not in one and "fewer ranks" not in one
+
+
+INDENTER_SCENE = SMALL.replace('hurst = 0.8\nlambda_min = "8 a0"\nseed = 3',
+                              'kind = "{kind}"\nradius = 1e-300')
+
+
+def test_unresolved_indenters_and_check_agrees_with_run(comm, shared):
+    """A paraboloid and a sphere of radius 1e-300 (heights of 1e303, or a flat surface) are
+    refused by ``check`` and ``run`` alike, naming surface.radius; ``check`` refuses
+    whatever ``run`` refuses before it solves (here also the line scan and the map without
+    a defined point) and, for a valid scene, prints the estimated memory per rank."""
+    d = shared / "geometry"
+
+    def prepare():
+        d.mkdir()
+        scenes = {(kind, command): d / f"{kind}-{command}.toml"
+                  for kind in ("paraboloid", "sphere") for command in ("check", "run")}
+        for (kind, _), scene in scenes.items():
+            scene.write_text(INDENTER_SCENE.format(kind=kind))
+        (d / "valid.toml").write_text(SMALL)
+        return scenes
+    scenes = wait_for_root(prepare)
+    jobs = [(_mpirun(["petgap", command, scene] + (["-o", d / f"{kind}.h5"]
+                                                   if command == "run" else [])), scene)
+            for (kind, command), scene in scenes.items()]
+    jobs.append((_mpirun(["petgap", "check", d / "valid.toml"]), d / "valid.toml"))
+    *outcomes, valid = run_many(jobs, timeout=60)
+    problems = []
+    for ((kind, command), scene), proc in zip(scenes.items(), outcomes):
+        problems += [f"{kind} ({command}): {p}" for p in _refused(
+            proc, scene, ["surface.radius = 1e-300", f"the {kind} is not resolved",
+                          "radius >= 1"])]
+    assert not problems, "\n".join(problems)
+    assert valid["returncode"] == 0, valid["stderr"]
+    assert "# memory: about" in valid["stdout"] and "per rank at its peak on 2 ranks" \
+        in valid["stdout"] and "(2 steps planned)" in valid["stdout"]
+
+
+def test_scene_with_a_byte_order_mark_runs(comm, shared):
+    """A scene file saved with a UTF-8 byte-order mark (as some Windows editors do) is
+    read as the same scene without it."""
+    d = shared / "bom"
+
+    def prepare():
+        d.mkdir()
+        (d / "bom.toml").write_bytes(b"\xef\xbb\xbf" + SMALL.encode())
+    wait_for_root(prepare)
+    check, run = run_many([(_mpirun(["petgap", "check", d / "bom.toml"]), d / "bom.toml"),
+                           (_mpirun(["petgap", "run", d / "bom.toml", "-o", d / "bom.h5",
+                                     "-q"]), d / "bom.h5")])
+    assert check["returncode"] == 0 and "bom.toml: valid" in check["stdout"], check["stderr"]
+    assert run["returncode"] == 0, run["stderr"]
+    assert read_result(d / "bom.h5")["attrs"]["complete"] is True
+
+
+def test_output_links_and_sidecar_directories_are_refused(comm, shared):
+    """A dangling symbolic link as --output, and a lock or .partial path that is a
+    directory, are each refused naming the path and what it is, before anything is
+    made; the link, its missing target and the directories are left as they were."""
+    d = shared / "sidecars"
+
+    def prepare():
+        d.mkdir()
+        (d / "small.toml").write_text(SMALL)
+        (d / "dangling.h5").symlink_to(d / "gone" / "r.h5")
+        (d / ".locked.h5.lock").mkdir()
+        (d / ".partial.h5.partial").mkdir()
+    wait_for_root(prepare)
+    cases = [("dangling.h5", [f"output path {d / 'dangling.h5'} is a symbolic link to "
+                              f"{d / 'gone' / 'r.h5'}, which does not exist"]),
+             ("locked.h5", [f"{d / '.locked.h5.lock'} is a directory",
+                            f"keeps the lock of {d / 'locked.h5'}"]),
+             ("partial.h5", [f"{d / '.partial.h5.partial'} is a directory",
+                             f"makes {d / 'partial.h5'} before renaming it"])]
+    outcomes = run_many([(_mpirun(["petgap", "run", d / "small.toml", "-o", d / out]),
+                          d / out) for out, _ in cases])
+    problems = []
+    for (out, fragments), proc in zip(cases, outcomes):
+        problems += [f"{out}: {p}" for p in _refused(proc, d / "small.toml", fragments)]
+        if "making the surface" in proc["stdout"]:
+            problems.append(f"{out}: the surface was made")
+    assert not problems, "\n".join(problems)
+
+    def after():
+        return ((d / "dangling.h5").is_symlink(), (d / "gone").exists(),
+                (d / ".locked.h5.lock").is_dir(), (d / ".partial.h5.partial").is_dir(),
+                sorted(p.name for p in d.iterdir() if p.is_file() and not p.is_symlink()))
+    assert wait_for_root(after) == (True, False, True, True, ["small.toml"])
+
+
+def test_post_names_a_truncated_result(comm, shared):
+    """``petgap-post`` on a result file cut short names the file and says it is truncated,
+    with the bytes it has and those its HDF5 superblock states."""
+    d = shared / "post-truncated"
+
+    def prepare():
+        d.mkdir()
+        with h5py.File(d / "whole.h5", "w") as f:
+            f.attrs["petgap_version"] = "0"
+            f["step_0000/gap"] = np.zeros((64, 64))
+        whole = (d / "whole.h5").read_bytes()
+        (d / "cut.h5").write_bytes(whole[:len(whole) // 2])
+        return len(whole)
+    size = wait_for_root(prepare)
+    (proc,) = run_many([(_mpirun(["petgap-post", d / "cut.h5", "-o", d / "out"]),
+                         d / "cut.h5")])
+    err = proc["stderr"]
+    assert not proc["hung"] and proc["returncode"] == 2 and "Traceback" not in err, err
+    assert err.count("petgap-post: error:") == 1
+    assert f"{d / 'cut.h5'}: truncated: {size // 2} bytes of the {size}" in err, err

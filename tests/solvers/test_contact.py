@@ -959,3 +959,20 @@ def test_contact_set_keeps_one_copy_as_it_shrinks_and_grows():
     huge = np.broadcast_to(np.uint8(0), (70000, 40000))  # no memory behind it
     with pytest.raises(ValueError, match="32-bit index lists.*more MPI ranks"):
         ContactSet(huge, 40002)
+
+
+def test_a_tao_builtin_that_stops_improving_says_so(comm, monkeypatch):
+    """A TAO built-in asked for a tolerance below what its line search resolves stops as
+    ``stalled_round_off`` once its residual has not fallen by a tenth for the stall window,
+    instead of running to its iteration limit, and reports it as not converged."""
+    from petgap.solvers import tao  # deferred: only this test changes the window
+    monkeypatch.setattr(tao, "TAO_STALL_ITERATIONS", 20)
+    problem = rough_problem(make_grid((32, 32), comm))
+    residuals = []
+    solution = solve(problem, Load(0.02 * problem.pressure_scale), solver="bncg",
+                     tolerance=1e-15, max_iterations=100000,
+                     monitor=lambda it, residual: residuals.append(residual))
+    assert not solution.converged and solution.reason == "stalled_round_off"
+    assert solution.iterations < 100000
+    # the last 20 checks never beat nine tenths of the best before them
+    assert min(residuals[-20:]) > 0.9 * min(residuals[:-20])

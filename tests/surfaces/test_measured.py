@@ -1,5 +1,6 @@
 """Measured maps in instrument formats, read through SurfaceTopography and conditioned."""
 import logging
+import time
 from pathlib import Path
 
 import numpy as np
@@ -115,6 +116,33 @@ def test_unrecognised_file_and_line_scan_are_refused(tmp_path):
         read_measured(tmp_path / "line.txt")
     with pytest.raises(ValueError, match="no channel 'height'"):
         read_measured(DATA / "nc-1.nc", channel="height")
+
+
+def test_a_reader_that_loops_is_stopped(tmp_path, monkeypatch):
+    """A third-party reader that never returns (as SurfaceTopography's WSxM reader at the
+    end of a file cut inside its header) is interrupted at the time limit: an error that
+    names the file, not a hang; the interruption is not swallowed by the ``except
+    Exception`` of format detection."""
+    import petgap.surfaces.measured as measured  # deferred: its limits are patched here
+
+    class Looping:
+        _name = "looping format"
+
+        def __init__(self, path):
+            try:
+                while True:
+                    pass
+            except Exception:   # what a detection loop does with a reader's error
+                pass
+
+    monkeypatch.setattr(measured, "READ_SECONDS", 0.5)
+    monkeypatch.setattr(measured, "readers_for", lambda path: ([Looping], True))
+    (tmp_path / "map.xyz").write_text("0 0 1\n")
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match=r"map.xyz: SurfaceTopography's reader did not finish "
+                                         r"within 0.5 s and was stopped"):
+        read_measured(tmp_path / "map.xyz")
+    assert time.perf_counter() - start < 10
 
 
 def test_scattered_slabs_are_the_map(comm):
