@@ -257,29 +257,30 @@ cdef inline void _row_to_coarse(const double[::1] row, double[:, ::1] out, Py_ss
         out[I1, J] += fx * acc[J]
 
 
-def coarse_restrict(const double[:, ::1] real, Py_ssize_t ny, Py_ssize_t x0, Py_ssize_t b,
-                    double[:, ::1] out):
-    """``out[I, J] += sum_x hat_IJ(x) real(x)`` over this rank's rows (first ``ny`` columns)."""
-    cdef Py_ssize_t i, m = real.shape[0]
-    cdef double[::1] acc = np.zeros(out.shape[1])
-    with nogil:
-        for i in range(m):
-            _row_to_coarse(real[i, :ny], out, x0 + i, b, acc)
+def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const double[:, ::1] vp,
+                    const double[:, ::1] vpp, bint adh, double divisor, double lam_f,
+                    double lam, double[:, ::1] real, double edge, Py_ssize_t x0, Py_ssize_t b,
+                    double[:, ::1] springs, double[:, ::1] rhs):
+    """:func:`gcg_write_residual` and, in the same pass, the coarse grid's data.
 
-
-def coarse_springs(const double[:, ::1] g, const double[:, ::1] vp, const double[:, ::1] vpp,
-                   bint adh, double divisor, double edge, Py_ssize_t x0, Py_ssize_t b,
-                   double[:, ::1] out):
-    """Restrict the springs: ``edge`` per free neighbour along y at a point at the wall,
-    ``v''(g)`` elsewhere (``vpp``, or ``-v' / divisor`` where the law fills no ``v''``
-    field, as in :func:`gcg_curvature`; nothing for the hard wall)."""
+    ``rhs += R r`` (times ``b^2``) of the residual written, and ``springs +=`` the
+    same of the springs: ``edge`` per free neighbour along the row at a point at
+    the wall, ``v''(g)`` elsewhere (``vpp``, or ``-v' / divisor`` where the law fills
+    no ``v''`` field, as in :func:`gcg_curvature`; nothing for the hard wall).
+    """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef bint second = vpp is not None
+    cdef double gr
     cdef double[::1] row = np.zeros(n)
-    cdef double[::1] acc = np.zeros(out.shape[1])
+    cdef double[::1] acc = np.zeros(rhs.shape[1])
     with nogil:
         for i in range(m):
             for j in range(n):
+                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
+                if g[i, j] > 0.0 or gr + lam_f < 0.0:
+                    real[i, j] = gr + lam
+                else:
+                    real[i, j] = 0.0
                 if g[i, j] <= 0.0:
                     row[j] = edge * ((g[i, j - 1 if j > 0 else n - 1] > 0.0) +
                                      (g[i, j + 1 if j + 1 < n else 0] > 0.0))
@@ -287,7 +288,8 @@ def coarse_springs(const double[:, ::1] g, const double[:, ::1] vp, const double
                     row[j] = vpp[i, j] if second else -vp[i, j] / divisor
                 else:
                     row[j] = 0.0
-            _row_to_coarse(row, out, x0 + i, b, acc)
+            _row_to_coarse(real[i, :n], rhs, x0 + i, b, acc)
+            _row_to_coarse(row, springs, x0 + i, b, acc)
 
 
 def coarse_subtract(double[:, ::1] real, Py_ssize_t ny, const double[:, ::1] y,
@@ -313,23 +315,28 @@ def coarse_subtract(double[:, ::1] real, Py_ssize_t ny, const double[:, ::1] y,
                     real[i, J * b + k] -= a + (<double>k / b) * d
 
 
-def gcg_cross_sums(const double[:, ::1] real, double[:, ::1] r_old, const double[:, ::1] t,
-                   const double[:, ::1] pel, const double[:, ::1] g, const double[:, ::1] vp,
-                   bint adh, double lam_f, double lam):
-    """Returns ``(sum_F z r_old, sum_F r_old, sum_F t)`` (``z = real``), then ``r_old =
-    grad + lam`` on F and 0 elsewhere: the Polak-Ribiere term of
-    :func:`petgap.solvers.gap_cg.gap_cg` and the mean of the old direction over F."""
+def gcg_precond_cross_sums(const double[:, ::1] real, double[:, ::1] r_old,
+                           const double[:, ::1] t, const double[:, ::1] pel,
+                           const double[:, ::1] g, const double[:, ::1] vp, bint adh,
+                           double lam_f, double lam):
+    """:func:`gcg_precond_sums` and, in the same pass, ``(sum_F z r_old, sum_F r_old,
+    sum_F t)``; then ``r_old = grad + lam`` on F and 0 elsewhere.  The Polak-Ribiere
+    term and the old direction's mean over F of :func:`petgap.solvers.gap_cg._beta`."""
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double gr, szr = 0.0, sr = 0.0, st = 0.0
+    cdef double gr, z, sz = 0.0, srz = 0.0, sr = 0.0, szr = 0.0, so = 0.0, st = 0.0
     with nogil:
         for i in range(m):
             for j in range(n):
                 gr = pel[i, j] + (vp[i, j] if adh else 0.0)
                 if g[i, j] > 0.0 or gr + lam_f < 0.0:
-                    szr += real[i, j] * r_old[i, j]
-                    sr += r_old[i, j]
+                    z = real[i, j]
+                    sz += z
+                    srz += (gr + lam) * z
+                    sr += gr + lam
+                    szr += z * r_old[i, j]
+                    so += r_old[i, j]
                     st += t[i, j]
                     r_old[i, j] = gr + lam
                 else:
                     r_old[i, j] = 0.0
-    return szr, sr, st
+    return sz, srz, sr, szr, so, st

@@ -156,6 +156,7 @@ class _State:
     projected: int = 0        # steps whose projection acted
     released: int = 0         # restarts on a strong release (_released_strongly)
     capped: int = 0           # steps capped at the law's length scale
+    cross: tuple = ()         # with two_level: sum_F z r_old, sum_F r_old, sum_F t (_beta)
 
 
 def _project_mean(grid, g, target, h, padded, comm):
@@ -301,16 +302,24 @@ def _precondition(f, s):
     stiffen the mean mode as the contact does (:mod:`petgap.solvers.gap_two_level`).
     """
     n = f.grid.npoints
-    _pass(_k.gcg_write_residual, f.pel, f.g, f.vp, f.adhesive, s.lam_f, s.lam, f.padded)
     if f.coarse is not None:
-        f.coarse.set_springs(f.g, f.vp, f.vpp, f.adhesive, f.divisor)
-        f.coarse.restrict(f.padded)
+        with event(GAP_CG_EVENT):
+            f.coarse.write_residual(f, s)
+    else:
+        _pass(_k.gcg_write_residual, f.pel, f.g, f.vp, f.adhesive, s.lam_f, s.lam, f.padded)
     f.half_space.apply_in_buffer(inverse=True)
     if f.coarse is not None:
-        f.coarse.correct(f.padded)
-    sum_z, rz, sum_r = global_sums(
-        f.comm, *_pass(_k.gcg_precond_sums, f.padded, f.pel, f.g, f.vp, f.adhesive, s.lam_f,
-                       s.lam))
+        with event(GAP_CG_EVENT):
+            f.coarse.correct(f.padded)
+    if f.r_old is None:
+        sum_z, rz, sum_r = global_sums(
+            f.comm, *_pass(_k.gcg_precond_sums, f.padded, f.pel, f.g, f.vp, f.adhesive,
+                           s.lam_f, s.lam))
+    else:
+        # with the sums _beta needs, in the same pass
+        sum_z, rz, sum_r, *s.cross = global_sums(
+            f.comm, *_pass(_k.gcg_precond_cross_sums, f.padded, f.r_old, f.t, f.pel, f.g,
+                           f.vp, f.adhesive, s.lam_f, s.lam))
     if f.load:
         # z += c mean(r) on F, i.e. a shift of -c sum_r / n
         return -f.mean_mode * sum_r / n, rz + f.mean_mode * sum_r * sum_r / n
@@ -322,14 +331,12 @@ def _beta(f, s, rz, zshift):
 
     Without ``two_level``: the ratio of ``r.z``.  With it (module docstring):
     Polak-Ribiere+, ``max(0, (r.z - r_old.z) / (r.z)_old)`` over ``F``, and under
-    mean-gap control the shift also takes the old direction's mean over ``F`` off.
-    One pass, which also keeps ``r`` for the next iteration.
+    mean-gap control the shift also takes the old direction's mean over ``F`` off;
+    the sums come from :func:`_precondition`'s pass.
     """
     if f.r_old is None:
         return (rz / s.rz_old if s.beta_ok else 0.0), zshift
-    cross, sum_old, sum_t = global_sums(f.comm, *_pass(
-        _k.gcg_cross_sums, f.padded, f.r_old, f.t, f.pel, f.g, f.vp, f.adhesive, s.lam_f,
-        s.lam))
+    cross, sum_old, sum_t = s.cross
     if not s.beta_ok:
         beta = 0.0
     elif POLAK_RIBIERE:

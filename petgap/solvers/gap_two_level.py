@@ -52,9 +52,9 @@ Under load control the mean mode is free; the coarse grid's mean mode gets the
 compliance of the cell's longest wave, and the springs give it the stiffness
 of the contact, which no fixed guess of it has (:mod:`petgap.solvers.gap_cg`).
 
-Cost per iteration: three passes over the slab (springs, restriction, the
-prolongation subtracted) and a few dozen transform pairs of the coarse grid,
-no transform of the fine grid.  The springs on the contact set are estimated
+Cost per iteration: the springs and ``R r`` ride on the pass that writes the
+residual; one pass subtracts the prolongation; a few dozen transform pairs of
+the coarse grid, and no transform of the fine grid.  The springs on the contact set are estimated
 from its edge along the rows (:data:`EDGE_SPRING` per free neighbour), not from
 ``K 1_C`` (a transform pair whenever ``C`` changes): the iterations hardly
 change when the springs are halved or doubled, nor with ``K 1_C`` itself.
@@ -157,20 +157,17 @@ class CoarseTerm:
         self.grid.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
         return local / float(self.block) ** 2
 
-    def set_springs(self, g, vp, vpp, adhesive, divisor):
-        """``W`` from the contact edges and ``v''(g)`` of the current gap (one pass).
+    def write_residual(self, f, s):
+        """The residual into the FFT buffer (as :func:`petgap.solvers._kernels.gcg_write_residual`),
+        and in the same pass ``R r`` and the springs ``W`` of the current gap.
 
-        ``vpp`` is the law's ``v''`` field, or None: then ``v'' = -v' / divisor``
-        (:class:`petgap.solvers.gap_cg._Fields`)."""
-        local = np.zeros(self.coarse_shape)
-        _k.coarse_springs(g, vp, vpp, adhesive, divisor, self.edge, self.x0, self.block, local)
-        self.springs = self._summed(local)
-
-    def restrict(self, padded):
-        """Keep ``R r`` of the residual in the FFT buffer (before ``K^{-1}`` is applied)."""
-        local = np.zeros(self.coarse_shape)
-        _k.coarse_restrict(padded, self.grid.ny, self.x0, self.block, local)
-        self.rhs = self._summed(local)
+        ``f`` and ``s`` are the gap solver's fields and scalars
+        (:class:`petgap.solvers.gap_cg._Fields`, :class:`petgap.solvers.gap_cg._State`).
+        """
+        local = np.zeros((2,) + self.coarse_shape)
+        _k.coarse_residual(f.pel, f.g, f.vp, f.vpp, f.adhesive, f.divisor, s.lam_f, s.lam,
+                           f.padded, self.edge, self.x0, self.block, local[0], local[1])
+        self.springs, self.rhs = self._summed(local)
 
     def _filter(self, y, symbol):
         return np.fft.irfft2(np.fft.rfft2(y) * symbol, s=self.coarse_shape)

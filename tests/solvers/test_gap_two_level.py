@@ -59,17 +59,23 @@ def test_coarse_compliance_is_the_galerkin_product(shape, size, b):
 
 
 def test_transfer_kernels_are_the_hat_matrices(comm):
+    """On every point free and no interaction the residual pass restricts ``p_el``
+    (and finds no springs); the prolongation is the hats' matrix."""
     grid = Grid((64, 48), size=(1.0, 0.75), comm=comm, planner="estimate")
     b = 8
     px, py = hats(64, b), hats(48, b)
     rng = np.random.default_rng(1)
     whole = rng.standard_normal((64, 48))
     y = rng.standard_normal((8, 6))
-    grid.real[...] = whole[grid.x_slice]
-    local = np.zeros((8, 6))
-    _k.coarse_restrict(grid.padded, grid.ny, grid.x_slice.start, b, local)
+    pel = np.ascontiguousarray(whole[grid.x_slice])
+    g = np.ones(grid.local_shape)
+    local = np.zeros((2, 8, 6))
+    _k.coarse_residual(pel, g, pel, None, False, 1.0, 0.0, 0.0, grid.padded, 1.0,
+                       grid.x_slice.start, b, local[0], local[1])
     comm.Allreduce(MPI.IN_PLACE, local)
-    assert np.allclose(local, px.T @ whole @ py, rtol=0, atol=1e-12 * np.abs(whole).sum())
+    assert np.array_equal(grid.real, pel)
+    assert not np.any(local[0])
+    assert np.allclose(local[1], px.T @ whole @ py, rtol=0, atol=1e-12 * np.abs(whole).sum())
     grid.real[...] = 0.0
     _k.coarse_subtract(grid.padded, grid.ny, y, grid.x_slice.start, b)
     assert np.allclose(-grid.real, (px @ y @ py.T)[grid.x_slice], rtol=0, atol=1e-12)
