@@ -60,28 +60,39 @@ def gcg_free_sums(const double[:, ::1] pel, const double[:, ::1] g, const double
     return s, count, gmax, gmin
 
 
+cdef inline double _free_residual(double pel, double g, double vp, bint adh, double lam_f,
+                                  double lam) noexcept nogil:
+    """``grad + lam`` at a point of F, 0 elsewhere."""
+    cdef double gr = pel + (vp if adh else 0.0)
+    if g > 0.0 or gr + lam_f < 0.0:
+        return gr + lam
+    return 0.0
+
+
 def gcg_write_residual(const double[:, ::1] pel, const double[:, ::1] g,
                        const double[:, ::1] vp, bint adh, double lam_f, double lam,
                        double[:, ::1] real):
     """``real = grad + lam`` on F, 0 elsewhere (the residual to precondition)."""
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double gr
     with nogil:
         for i in range(m):
             for j in range(n):
-                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
-                if g[i, j] > 0.0 or gr + lam_f < 0.0:
-                    real[i, j] = gr + lam
-                else:
-                    real[i, j] = 0.0
+                real[i, j] = _free_residual(pel[i, j], g[i, j], vp[i, j], adh, lam_f, lam)
 
 
 def gcg_precond_sums(const double[:, ::1] real, const double[:, ::1] pel,
                      const double[:, ::1] g, const double[:, ::1] vp, bint adh,
-                     double lam_f, double lam):
-    """Returns ``(sum_F z, sum_F r z, sum_F r)`` with ``z = real``, ``r = grad + lam``."""
+                     double lam_f, double lam, double[:, ::1] r_old=None,
+                     const double[:, ::1] t=None):
+    """Returns ``(sum_F z, sum_F r z, sum_F r)`` with ``z = real``, ``r = grad + lam``.
+
+    With ``r_old`` (and ``t``) also ``(sum_F z r_old, sum_F r_old, sum_F t)``, and
+    then ``r_old = r`` on F and 0 elsewhere: the Polak-Ribiere term and the old
+    direction's mean over F of :func:`petgap.solvers.gap_cg._beta`.
+    """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double gr, z, sz = 0.0, srz = 0.0, sr = 0.0
+    cdef double gr, z, sz = 0.0, srz = 0.0, sr = 0.0, szr = 0.0, so = 0.0, st = 0.0
+    cdef bint cross = r_old is not None
     with nogil:
         for i in range(m):
             for j in range(n):
@@ -91,6 +102,15 @@ def gcg_precond_sums(const double[:, ::1] real, const double[:, ::1] pel,
                     sz += z
                     srz += (gr + lam) * z
                     sr += gr + lam
+                    if cross:
+                        szr += z * r_old[i, j]
+                        so += r_old[i, j]
+                        st += t[i, j]
+                        r_old[i, j] = gr + lam
+                elif cross:
+                    r_old[i, j] = 0.0
+    if cross:
+        return sz, srz, sr, szr, so, st
     return sz, srz, sr
 
 
@@ -270,17 +290,12 @@ def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const doub
     """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef bint second = vpp is not None
-    cdef double gr
     cdef double[::1] row = np.zeros(n)
     cdef double[::1] acc = np.zeros(rhs.shape[1])
     with nogil:
         for i in range(m):
             for j in range(n):
-                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
-                if g[i, j] > 0.0 or gr + lam_f < 0.0:
-                    real[i, j] = gr + lam
-                else:
-                    real[i, j] = 0.0
+                real[i, j] = _free_residual(pel[i, j], g[i, j], vp[i, j], adh, lam_f, lam)
                 if g[i, j] <= 0.0:
                     row[j] = edge * ((g[i, j - 1 if j > 0 else n - 1] > 0.0) +
                                      (g[i, j + 1 if j + 1 < n else 0] > 0.0))
@@ -313,30 +328,3 @@ def coarse_subtract(double[:, ::1] real, Py_ssize_t ny, const double[:, ::1] y,
                 d = c[J1] - a
                 for k in range(b):
                     real[i, J * b + k] -= a + (<double>k / b) * d
-
-
-def gcg_precond_cross_sums(const double[:, ::1] real, double[:, ::1] r_old,
-                           const double[:, ::1] t, const double[:, ::1] pel,
-                           const double[:, ::1] g, const double[:, ::1] vp, bint adh,
-                           double lam_f, double lam):
-    """:func:`gcg_precond_sums` and, in the same pass, ``(sum_F z r_old, sum_F r_old,
-    sum_F t)``; then ``r_old = grad + lam`` on F and 0 elsewhere.  The Polak-Ribiere
-    term and the old direction's mean over F of :func:`petgap.solvers.gap_cg._beta`."""
-    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double gr, z, sz = 0.0, srz = 0.0, sr = 0.0, szr = 0.0, so = 0.0, st = 0.0
-    with nogil:
-        for i in range(m):
-            for j in range(n):
-                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
-                if g[i, j] > 0.0 or gr + lam_f < 0.0:
-                    z = real[i, j]
-                    sz += z
-                    srz += (gr + lam) * z
-                    sr += gr + lam
-                    szr += z * r_old[i, j]
-                    so += r_old[i, j]
-                    st += t[i, j]
-                    r_old[i, j] = gr + lam
-                else:
-                    r_old[i, j] = 0.0
-    return sz, srz, sr, szr, so, st

@@ -311,15 +311,10 @@ def _precondition(f, s):
     if f.coarse is not None:
         with event(GAP_CG_EVENT):
             f.coarse.correct(f.padded)
-    if f.r_old is None:
-        sum_z, rz, sum_r = global_sums(
-            f.comm, *_pass(_k.gcg_precond_sums, f.padded, f.pel, f.g, f.vp, f.adhesive,
-                           s.lam_f, s.lam))
-    else:
-        # with the sums _beta needs, in the same pass
-        sum_z, rz, sum_r, *s.cross = global_sums(
-            f.comm, *_pass(_k.gcg_precond_cross_sums, f.padded, f.r_old, f.t, f.pel, f.g,
-                           f.vp, f.adhesive, s.lam_f, s.lam))
+    # with two_level, the sums _beta needs ride on the same pass
+    sums = global_sums(f.comm, *_pass(_k.gcg_precond_sums, f.padded, f.pel, f.g, f.vp,
+                                      f.adhesive, s.lam_f, s.lam, f.r_old, f.t))
+    (sum_z, rz, sum_r), s.cross = sums[:3], sums[3:]
     if f.load:
         # z += c mean(r) on F, i.e. a shift of -c sum_r / n
         return -f.mean_mode * sum_r / n, rz + f.mean_mode * sum_r * sum_r / n
