@@ -423,6 +423,24 @@ def _advance(f, s, tau, restart, refresh_interval):
         s.beta_ok = True
 
 
+def _restarted(f, s, beta):
+    """After a direction that does not descend: whether the iteration goes on, restarted.
+
+    Round-off or non-convexity on a recurrence, or (with ``two_level``) a
+    direction kept across a projection: steepest descent from a fresh ``p_el``
+    goes on.  A steepest-descent direction on a fresh ``p_el`` that does not
+    descend ends the solve.
+    """
+    s.beta_ok = False
+    if s.fresh and not (f.two_level and beta != 0.0):
+        return False
+    if not s.fresh:
+        f.load_gap()
+        f.fresh_pressure()
+        s.fresh, s.since_fresh = True, 0
+    return True
+
+
 def _objective(f, s):
     """Elastic + interaction energy + ``P0 A mean(g)`` (the load's work; constant under mean gap).
 
@@ -510,14 +528,7 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
               beta)
         curv, slope, tmax = _curvature(f, s)
         if not slope < 0:
-            # not a descent direction (round-off or non-convexity, or a direction kept
-            # across a projection): restart, from a fresh p_el
-            s.beta_ok = False
-            if not s.fresh or (f.two_level and beta != 0.0):
-                if not s.fresh:
-                    f.load_gap()
-                    f.fresh_pressure()
-                    s.fresh, s.since_fresh = True, 0
+            if _restarted(f, s, beta):
                 continue
             reason = "no_descent_direction"
             break
