@@ -36,7 +36,7 @@ from petgap.mechanics.problem import ContactProblem
 from petgap.parallel.grid import Grid, check_decomposition
 from petgap.parallel.log import get_logger, timed
 from petgap.solvers.sweeps import SweepStep, sweep
-from petgap.solvers.tao import check_petsc_options
+from petgap.solvers.options import check_petsc_options
 from petgap.surfaces.indenters import KINDS as INDENTERS, indenter
 from petgap.surfaces.self_affine import self_affine
 from petgap.surfaces.statistics import low_pass
@@ -152,7 +152,7 @@ def check_options(scene, petsc_args=(), strict=False, log=None):
                     for name, close in strange]
     if unknown and strict:
         errors += [f"PETSc option {u}: petgap does not read it{hint}; allowed with --strict: "
-                   f"the options petgap reads (petgap.solvers.tao.KNOWN_OPTIONS)"
+                   f"the options petgap reads (petgap.solvers.options.KNOWN_OPTIONS)"
                    for u, hint in unknown]
     if errors:
         raise SceneError(errors[0] if len(errors) == 1 else
