@@ -453,7 +453,12 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
         with _timed(log, f"free boundary: planning the {2 * grid.nx}x{2 * grid.ny} padded "
                          f"cell's FFTs and transforming its kernel"):
             model.half_space = FreeHalfSpace(grid, modulus)
-    model.problem = ContactProblem(grid, topography, model.half_space)
+    try:
+        model.problem = ContactProblem(grid, topography, model.half_space)
+    except ValueError as err:   # a flat map: say which file it came from
+        if scene.surface.kind == "file":
+            raise ValueError(f"topography {scene.surface.path}: {err}") from None
+        raise
     interaction = scene.interaction
     law = from_scene(interaction)
     if law.adhesive:
