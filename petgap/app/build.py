@@ -36,7 +36,7 @@ from petgap.mechanics.problem import ContactProblem
 from petgap.parallel.grid import Grid, check_decomposition
 from petgap.parallel.log import get_logger, timed
 from petgap.solvers.sweeps import SweepStep, sweep
-from petgap.solvers.tao import check_petsc_options
+from petgap.solvers.options import check_petsc_options
 from petgap.surfaces.indenters import KINDS as INDENTERS, indenter
 from petgap.surfaces.self_affine import self_affine
 from petgap.surfaces.statistics import low_pass
@@ -152,7 +152,7 @@ def check_options(scene, petsc_args=(), strict=False, log=None):
                     for name, close in strange]
     if unknown and strict:
         errors += [f"PETSc option {u}: petgap does not read it{hint}; allowed with --strict: "
-                   f"the options petgap reads (petgap.solvers.tao.KNOWN_OPTIONS)"
+                   f"the options petgap reads (petgap.solvers.options.KNOWN_OPTIONS)"
                    for u, hint in unknown]
     if errors:
         raise SceneError(errors[0] if len(errors) == 1 else
@@ -453,7 +453,12 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
         with _timed(log, f"free boundary: planning the {2 * grid.nx}x{2 * grid.ny} padded "
                          f"cell's FFTs and transforming its kernel"):
             model.half_space = FreeHalfSpace(grid, modulus)
-    model.problem = ContactProblem(grid, topography, model.half_space)
+    try:
+        model.problem = ContactProblem(grid, topography, model.half_space)
+    except ValueError as err:   # a flat map: say which file it came from
+        if scene.surface.kind == "file":
+            raise ValueError(f"topography {scene.surface.path}: {err}") from None
+        raise
     interaction = scene.interaction
     law = from_scene(interaction)
     if law.adhesive:

@@ -68,7 +68,7 @@ from petgap.solvers.mixed_precision import solve_mixed
 from petgap.solvers.contact_limits import FullContact, touching_state
 from petgap.solvers.indentation import solve_mean_gap_by_indentation
 from petgap.solvers.settings import read_settings
-from petgap.solvers.tao import solve_as
+from petgap.solvers.control_loops import solve_as
 
 #: Solver types a scene may name (:data:`petgap.io.solver_registry.SOLVER_NAMES`).
 SOLVER_TYPES = registry.SOLVER_NAMES

@@ -26,7 +26,7 @@ the cell's problem with the surface out of reach outside the map:
 
 The solver (:class:`PaddedCell`) keeps the cell's problem of each map's problem while
 that lives: a sweep makes it once.  It solves the cell with the solver type the
-registry chose (:func:`petgap.solvers.tao.solve_as`), as it would a periodic problem.
+registry chose (:func:`petgap.solvers.control_loops.solve_as`), as it would a periodic problem.
 
 Cost: the whole solve runs on four times the points (fields and passes, not only the
 transforms as for the hard wall, which :mod:`petgap.solvers.pressure_cg` solves on the
@@ -41,7 +41,7 @@ from petgap.mechanics.free_half_space import PaddedCellHalfSpace
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.collective import move_rows
 from petgap.solvers.convergence import Timer
-from petgap.solvers.tao import solve_as
+from petgap.solvers.control_loops import solve_as
 
 #: Interaction length scales between the cell's surface outside the map and the map's
 #: lowest point: the gap outside stays above this many of them.

@@ -114,7 +114,7 @@ def _number_in(value, key, low, high, allowed):
 
 
 #: petgap's own PETSc options: the :class:`SolverSettings` field each sets, and the kind
-#: of value it takes (as :data:`petgap.solvers.tao.KNOWN_OPTIONS` says it).
+#: of value it takes (as :data:`petgap.solvers.options.KNOWN_OPTIONS` says it).
 PETGAP_OPTIONS = {"petgap_coarse_start": ("coarse_start", "bool"),
                   "petgap_coarse_tolerance": ("coarse_tolerance", "real"),
                   "petgap_edge_correction": ("edge_correction", "real"),

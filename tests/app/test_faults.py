@@ -791,6 +791,7 @@ INSTRUMENT_FILES = {
     "all-undefined": ("nan.npy", lambda p: np.save(p, np.full((16, 16), np.nan)),
                       'undefined = "harmonic"\n', ["every point is undefined", "256"]),
     "empty-npy": ("empty.npy", b"", "", ["is empty (0 bytes)"]),
+    "flat": ("flat.npy", lambda p: np.save(p, np.full((16, 16), 2.5)), "", ["is flat"]),
     "unknown-unit": ("good.top", wsxm(), "", ["units.length", "'furlong'", "'nm'"]),
 }
 
@@ -835,7 +836,8 @@ def _refused(proc, scene, fragments, leading=None):
 
 def test_bad_instrument_files_are_refused_naming_the_file(comm, shared):
     """Cut, truncated, empty and mislabelled instrument files, zero and negative sizes, a
-    line scan, a map without a defined point, a unit SurfaceTopography cannot convert:
+    line scan, a map without a defined point, a flat map, a unit SurfaceTopography cannot
+    convert:
     ``petgap check`` and ``petgap run`` each end within seconds -- no reader may loop --
     in one error on every rank that leads with the file and says what is wrong with it
     (naming units.length for the unit), and make no result."""

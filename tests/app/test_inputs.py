@@ -19,7 +19,7 @@ from petgap.app.build import (BYTES_PER_POINT_FREE, BYTES_PER_POINT_PRESSURE,
                               BYTES_PER_POINT_PRESSURE_SINGLE, BYTES_PER_POINT_SOLVE, check_options,
                               check_size)
 from petgap.io.scene import Scene, SceneError
-from petgap.solvers.tao import check_petsc_options
+from petgap.solvers.options import check_petsc_options
 
 SCENE = """
 [grid]

@@ -17,7 +17,7 @@ from petgap.parallel.grid import Grid
 from petgap.solvers.dispatch import solve
 from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.solvers.settings import SolverSettings
-from petgap.solvers.tao import check_petsc_options
+from petgap.solvers.options import check_petsc_options
 from petgap.surfaces.self_affine import self_affine
 
 
