@@ -472,7 +472,7 @@ def _control(problem, control):
 
 
 def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, monitor=None,
-           refresh_interval=50, two_level=False):
+           refresh_interval=50, two_level=None):
     """Solve hard-wall or adhesive contact on the gap, under load or mean-gap control.
 
     Parameters
@@ -488,9 +488,9 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         ``monitor(iteration, residual)`` on every rank.
     refresh_interval : int
         Recompute ``p_el`` from scratch at least this often.
-    two_level : bool
+    two_level : bool, optional
         The coarse term in the preconditioner, conjugacy kept across projections and
-        Polak-Ribiere+ (module docstring).
+        Polak-Ribiere+ (module docstring); ``settings.two_level`` by default.
 
     Returns
     -------
@@ -498,6 +498,7 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         ``history`` holds the residuals; ``reason`` says why it stopped.
     """
     tolerance, max_iterations = settings.tolerance, settings.max_iterations
+    two_level = settings.two_level if two_level is None else two_level
     timer = Timer()
     load, lam, target = _control(problem, control)
     start_ops = problem.operator_applications

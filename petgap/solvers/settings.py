@@ -49,6 +49,10 @@ class SolverSettings:
         grid (:mod:`petgap.solvers.pressure_cg`, "Precision").
     preconditioned : bool
         Precondition the pressure solver with the restricted stiffness.
+    two_level : bool
+        The gap solver's two-level preconditioner (:mod:`petgap.solvers.gap_two_level`):
+        the contact patches' pinning of long waves and the interaction's curvature on a
+        coarse grid, conjugacy kept across projections.  Off by default for now.
     solver : str
         The solver type asked for (:data:`petgap.io.solver_registry.SOLVER_NAMES`);
         ``"pcg"`` is resolved for each problem and control
@@ -67,6 +71,7 @@ class SolverSettings:
     interaction_block: int = BLOCK
     search_precision: str = "double"
     preconditioned: bool = True
+    two_level: bool = False
     solver: str = "pcg"
     precision: str = "double"
 
@@ -119,7 +124,8 @@ PETGAP_OPTIONS = {"petgap_coarse_start": ("coarse_start", "bool"),
                   "petgap_coarse_tolerance": ("coarse_tolerance", "real"),
                   "petgap_edge_correction": ("edge_correction", "real"),
                   "petgap_interaction_block": ("interaction_block", "int"),
-                  "petgap_search_precision": ("search_precision", "precision")}
+                  "petgap_search_precision": ("search_precision", "precision"),
+                  "petgap_two_level": ("two_level", "bool")}
 
 
 def read_settings(grid_precision, *, solver="pcg", tolerance=1e-8, max_iterations=10000,

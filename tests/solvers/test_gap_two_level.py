@@ -128,3 +128,21 @@ def test_two_level_reaches_the_same_state_on_any_ranks(comm):
     assert np.max(np.abs(b.gap - a.gap[rows])) <= 1e-10 * one.rms_height
     assert np.max(np.abs(b.pressure - a.pressure[rows])) <= 1e-9 * one.pressure_scale
     assert b.iterations == a.iterations
+
+
+def test_the_option_reaches_the_gap_solver(comm):
+    """``-petgap_two_level`` (a scene's ``solver.petsc_options`` or ``petgap.solve``'s
+    ``options``) turns the coarse term on for the solve through the settings read once,
+    and is a known, checked boolean option."""
+    from petgap.solvers.dispatch import solve   # deferred: the solve API, this test only
+    from petgap.solvers.options import check_petsc_options
+    problem = adhesive_problem(Grid((128, 128), comm=comm, planner="estimate"))
+    target = MeanGap(0.5 * problem.rms_height)
+    direct = gap_cg(problem, target, SolverSettings(tolerance=1e-9), two_level=True)
+    run = solve(problem, target, tolerance=1e-9, options={"petgap_two_level": "1"})
+    plain = solve(problem, target, tolerance=1e-9)
+    assert run.converged and direct.converged and plain.converged
+    assert run.iterations == direct.iterations != plain.iterations
+    assert run.step_counts["coarse_iterations"] > 0
+    errors, unknown = check_petsc_options({"petgap_two_level": "maybe"})
+    assert errors and errors[0][0] == "petgap_two_level" and not unknown
