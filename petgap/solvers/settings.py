@@ -52,7 +52,8 @@ class SolverSettings:
     two_level : bool
         The gap solver's two-level preconditioner (:mod:`petgap.solvers.gap_two_level`):
         the contact patches' pinning of long waves and the interaction's curvature on a
-        coarse grid, conjugacy kept across projections.  Off by default for now.
+        coarse grid, conjugacy kept across projections.  On by default; off
+        (``-petgap_two_level 0``) gives the plain compliance preconditioner.
     solver : str
         The solver type asked for (:data:`petgap.io.solver_registry.SOLVER_NAMES`);
         ``"pcg"`` is resolved for each problem and control
@@ -71,7 +72,7 @@ class SolverSettings:
     interaction_block: int = BLOCK
     search_precision: str = "double"
     preconditioned: bool = True
-    two_level: bool = False
+    two_level: bool = True
     solver: str = "pcg"
     precision: str = "double"
 

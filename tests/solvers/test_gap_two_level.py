@@ -132,17 +132,20 @@ def test_two_level_reaches_the_same_state_on_any_ranks(comm):
 
 def test_the_option_reaches_the_gap_solver(comm):
     """``-petgap_two_level`` (a scene's ``solver.petsc_options`` or ``petgap.solve``'s
-    ``options``) turns the coarse term on for the solve through the settings read once,
-    and is a known, checked boolean option."""
+    ``options``) reaches the gap solver through the settings read once (on by default,
+    ``0`` turns the coarse term off), and is a known, checked boolean option."""
     from petgap.solvers.dispatch import solve   # deferred: the solve API, this test only
     from petgap.solvers.options import check_petsc_options
     problem = adhesive_problem(Grid((128, 128), comm=comm, planner="estimate"))
     target = MeanGap(0.5 * problem.rms_height)
     direct = gap_cg(problem, target, SolverSettings(tolerance=1e-9), two_level=True)
-    run = solve(problem, target, tolerance=1e-9, options={"petgap_two_level": "1"})
-    plain = solve(problem, target, tolerance=1e-9)
+    run = solve(problem, target, tolerance=1e-9)
+    plain = solve(problem, target, tolerance=1e-9, options={"petgap_two_level": "0"})
+    assert SolverSettings().two_level
     assert run.converged and direct.converged and plain.converged
     assert run.iterations == direct.iterations != plain.iterations
+    assert "coarse_iterations" not in getattr(plain, "step_counts", {}) \
+        or plain.step_counts["coarse_iterations"] == 0
     assert run.step_counts["coarse_iterations"] > 0
     errors, unknown = check_petsc_options({"petgap_two_level": "maybe"})
     assert errors and errors[0][0] == "petgap_two_level" and not unknown
