@@ -252,12 +252,8 @@ def _check(heights, pixel_size, load, mean_gap, contact_modulus, interaction, wo
     control = _check_control(load, mean_gap)
     contact_modulus = _positive("contact_modulus", contact_modulus)
     interaction = _check_interaction(interaction, work, rho)
-    refusal = registry.refusal(registry.Case(
-        solver=solver, control=control.kind, adhesive=interaction.adhesive,
-        periodic=bool(periodic),
-        loads=(control.mean_pressure,) if isinstance(control, Load) else ()))
-    if refusal is not None:
-        raise ValueError(refusal.message())
+    registry.check(registry.Case(solver=solver, adhesive=interaction.adhesive,
+                                 periodic=bool(periodic), **registry.control_words(control)))
     if fields not in FIELDS:
         raise ValueError(f"fields = {fields!r} is not one of {', '.join(map(repr, FIELDS))}")
     return heights, pixel, control, contact_modulus, interaction

@@ -242,6 +242,23 @@ def refusal(case):
     return found[0] if found else None
 
 
+def check(case):
+    """Raise ValueError with the :meth:`Refusal.message` of the first rule ``case`` breaks."""
+    found = refusal(case)
+    if found is not None:
+        raise ValueError(found.message())
+
+
+def control_words(control):
+    """A control object's part of a :class:`Case`: its ``kind`` and, under load, its load.
+
+    Any object with ``kind`` (one of :data:`CONTROLS`) and ``value`` will do
+    (:class:`petgap.mechanics.problem.Load`, ``MeanGap``, ``Indentation``).
+    """
+    return {"control": control.kind,
+            "loads": (control.value,) if control.kind == "load" else ()}
+
+
 def _precision(case):
     """Single and mixed precision: the pressure solver, the hard wall, a periodic cell."""
     precision, grid = case.precision, case.grid

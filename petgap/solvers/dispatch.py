@@ -121,10 +121,9 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
 def case_of(problem, control, settings):
     """What ``solve`` combines, in the registry's words (:class:`~petgap.io.solver_registry.Case`)."""
     return registry.Case(
-        solver=settings.solver, control=control.kind, adhesive=problem.interaction.adhesive,
+        solver=settings.solver, adhesive=problem.interaction.adhesive,
         periodic=problem.half_space.periodic, precision=settings.precision,
-        grid=problem.grid.precision,
-        loads=(control.mean_pressure,) if isinstance(control, Load) else ())
+        grid=problem.grid.precision, **registry.control_words(control))
 
 
 def run(problem, control, settings, *, initial=None, monitor=None):
@@ -134,9 +133,7 @@ def run(problem, control, settings, *, initial=None, monitor=None):
     the registry does not solve.  Collective.
     """
     case = case_of(problem, control, settings)
-    refusal = registry.refusal(case)
-    if refusal is not None:
-        raise ValueError(refusal.message())
+    registry.check(case)
     kind = case.kind
     how = registry.method(kind, case.control, case.adhesive, case.periodic)
     if how == "padded cell":

@@ -458,12 +458,9 @@ def _objective(f, s):
 def _control(problem, control):
     """``(load, P0, mean gap)`` of a control, refused as the registry says
     (:mod:`petgap.io.solver_registry`: a hard wall carries no tension)."""
-    refusal = registry.refusal(registry.Case(
-        solver="pcg-gap", control=control.kind, adhesive=problem.interaction.adhesive,
-        periodic=problem.half_space.periodic,
-        loads=(control.mean_pressure,) if isinstance(control, Load) else ()))
-    if refusal is not None:
-        raise ValueError(refusal.message())
+    registry.check(registry.Case(solver="pcg-gap", adhesive=problem.interaction.adhesive,
+                                 periodic=problem.half_space.periodic,
+                                 **registry.control_words(control)))
     if isinstance(control, Load):
         return True, float(control.mean_pressure), None
     if isinstance(control, MeanGap):

@@ -186,11 +186,8 @@ def _control_target(problem, control):
     through the indentation, one level up.
     """
     periodic = problem.half_space.periodic
-    refusal = registry.refusal(registry.Case(
-        solver="pcg-pressure", control=control.kind, adhesive=problem.interaction.adhesive,
-        periodic=periodic, loads=(control.mean_pressure,) if isinstance(control, Load) else ()))
-    if refusal is not None:
-        raise ValueError(refusal.message())
+    registry.check(registry.Case(solver="pcg-pressure", adhesive=problem.interaction.adhesive,
+                                 periodic=periodic, **registry.control_words(control)))
     if isinstance(control, MeanGap) and not periodic:
         raise ValueError("on a free boundary the mean gap is reached through the "
                          "indentation (petgap.solvers.indentation)")

@@ -97,3 +97,15 @@ def test_the_settings_are_read_once_from_keywords_and_options():
         read_settings("double")
     with pytest.raises(ValueError, match="solver 'bncgg' is not one of pcg"):
         SolverSettings(solver="bncgg")
+
+
+def test_a_control_object_in_the_registrys_words_and_the_check_that_raises():
+    from petgap.mechanics.problem import Indentation, Load, MeanGap  # deferred: this test only
+    assert registry.control_words(Load(-0.5)) == {"control": "load", "loads": (-0.5,)}
+    assert registry.control_words(MeanGap(1.0)) == {"control": "mean-gap", "loads": ()}
+    assert registry.control_words(Indentation(0.2)) == {"control": "indentation", "loads": ()}
+    registry.check(Case(solver="pcg", adhesive=True, periodic=True,
+                        **registry.control_words(Load(-0.5))))
+    with pytest.raises(ValueError, match=r"load -0.5 is tensile.*allowed: a load >= 0"):
+        registry.check(Case(solver="pcg", adhesive=False, periodic=True,
+                            **registry.control_words(Load(-0.5))))
