@@ -3,9 +3,9 @@
 * Mean-gap control for TAO's built-ins, which minimise the load-control energy:
   a secant on the multiplier ``log(P0)`` around inexact load solves
   (:func:`solve_mean_gap_by_multiplier`).
-* Adhesive load control on the gap: a safeguarded secant on the mean gap around
-  warm-started mean-gap solves (:func:`solve_load_by_mean_gap`), so that each step
-  reports which branch of a hysteretic interface it landed on.
+* Adhesive load control on the gap: one load-controlled gap solve started on a
+  branch (:func:`solve_adhesive_load`), which reports pull-off when no state on
+  that branch carries the load.
 
 :func:`solve_as` runs a solver type the registry resolved
 (:mod:`petgap.io.solver_registry`) through the loop its control needs; the inner
@@ -29,12 +29,12 @@ def solve_as(problem, control, kind, settings, initial=None, monitor=None):
     ``kind`` is a resolved solver type (never ``"pcg"``:
     :func:`petgap.io.solver_registry.resolve`), run through the loop its control needs
     (:func:`petgap.io.solver_registry.method`): adhesive load control on the gap by
-    :func:`solve_load_by_mean_gap`, mean-gap control of a TAO built-in by
+    :func:`solve_adhesive_load`, mean-gap control of a TAO built-in by
     :func:`solve_mean_gap_by_multiplier`, anything else by one :func:`tao_solve`.
     ``initial`` is a warm start (a previous solution).  Collective.
     """
     how = method(kind, control.kind, problem.interaction.adhesive, problem.half_space.periodic)
-    loops = {"mean-gap secant": solve_load_by_mean_gap, "multiplier": solve_mean_gap_by_multiplier,
+    loops = {"from the hard wall": solve_adhesive_load, "multiplier": solve_mean_gap_by_multiplier,
              "direct": tao_solve}
     if how not in loops:
         raise ValueError(f"{kind} reaches {control.kind} control here by {how!r}, which "
@@ -180,147 +180,53 @@ def _inner_tolerance(tolerance, error, load, slope, forcing=0.5):
     return min(tolerance, wanted)
 
 
-def solve_load_by_mean_gap(problem, control, kind, settings, initial=None, monitor=None,
-                           max_outer=60):
-    """Adhesive load control: find the mean gap whose multiplier is the load.
+def solve_adhesive_load(problem, control, kind, settings, initial=None, monitor=None):
+    """Adhesive load control on the gap: one gap solve under the load, from a state on a branch.
 
-    A safeguarded secant (regula falsi once the root is bracketed) on
-    ``P(g_bar) - P0`` with warm-started mean-gap solves of type ``kind``
-    (:class:`_LoadSecant`).  ``P(g_bar)`` of an adhesive interface need not be
-    monotone; the branch found is the one connected to the starting gap (the
-    previous step of a sweep, else the non-adhesive solution at the same load,
-    :func:`_branch_start`), and is reported in ``history``.  Full contact
-    (``g_bar = 0``) carries every load that leaves no wall reaction tensile
-    (:func:`_carried_in_full_contact`).
+    Under load control the equilibria a user can reach are the local minima of
+    the enthalpy (elastic and interaction energy plus the load's work), which the
+    gap solver minimises directly; the branch is chosen by the start: a sweep's
+    previous step, else the same surface against a hard wall at the same load
+    (:func:`_branch_start`), from which a compressive load keeps the contact it
+    has and a tensile one peels it.  Where no state on that branch carries the
+    load -- below its pull-off -- the surfaces separate, which the solver
+    detects and reports as ``converged=False`` with reason ``"load_not_reached"``
+    (:func:`petgap.solvers.gap_cg._pulled_off`).  A jump into full contact is a
+    minimum like any other.  The iteration limit covers the seed's iterations.
     """
     timer = Timer()
     target = float(control.mean_pressure)
-    tolerance, max_iterations = settings.tolerance, settings.max_iterations
     start_ops = problem.operator_applications
-    gap_guess, state, iterations = _branch_start(problem, target, settings, initial)
-    secant = _LoadSecant(problem, target, state)
-    solution, history, negative_curvature, exhausted = state, [], 0, False
-    for outer in range(max_outer):
-        budget = max_iterations - iterations  # the limit is per step, seed included
-        if budget < 1:
-            exhausted = True  # (the state is then a trial or the hard-wall seed)
-            break
-        solution = tao_solve(problem, MeanGap(max(gap_guess, 0.0)), kind,
-                             settings.but(max_iterations=budget), secant.on_branch, monitor)
-        iterations += solution.iterations
-        negative_curvature += solution.negative_curvature_steps
-        f = solution.mean_pressure - target
-        history.append((solution.mean_gap, solution.mean_pressure))
-        if not solution.converged or abs(f) <= tolerance * problem.pressure_scale:
-            break
-        if solution.mean_gap == 0.0 and _carried_in_full_contact(problem, solution, target):
-            break
-        gap_guess = secant.next_gap(solution, f)
-        if gap_guess is None:
-            break  # pull-off: the branch ends without carrying the load
-    converged = not exhausted and solution.converged and \
-        abs(solution.mean_pressure - target) <= tolerance * problem.pressure_scale
-    reason = "converged_kkt" if converged else "max_iterations" if exhausted else \
-        (solution.reason if not solution.converged else "load_not_reached")
+    state, seeded = _branch_start(problem, target, settings, initial)
+    budget = settings.max_iterations - seeded
+    if budget < 1:
+        solution = state
+        converged, reason, iterations = False, "max_iterations", seeded
+    else:
+        solution = tao_solve(problem, control, kind, settings.but(max_iterations=budget), state,
+                             monitor)
+        converged, reason = solution.converged, solution.reason
+        iterations = seeded + solution.iterations
     result = problem.make_solution(
         solution.gap, solution.pressure, solution.gap <= 0, control, converged=converged,
-        reason=reason, solver=f"{kind}+mean-gap-secant", iterations=iterations,
+        reason=reason, solver=kind, iterations=iterations,
         operator_applications=problem.operator_applications - start_ops, wall_time=timer(),
-        history=history)
-    result.negative_curvature_steps = negative_curvature  # of all inner solves
+        history=solution.history)
+    result.negative_curvature_steps = getattr(solution, "negative_curvature_steps", 0)
+    result.step_counts = getattr(solution, "step_counts", None)
     return result
 
 
 def _branch_start(problem, target, settings, initial):
-    """The mean gap to try first, the state it is on, and the iterations that cost.
+    """The state to start from, and the iterations it cost.
 
     A sweep's previous step; else the same surface against a hard wall at the same
     load (at least ``1e-3 h0' E*``), whose operator applications count as this
     solve's (the half-space is shared).
     """
     if initial is not None:
-        return initial.mean_gap, initial, 0
+        return initial, 0
     hard = problem.with_interaction(None)
     seed = polonsky_keer(hard, Load(max(target, 1e-3 * problem.pressure_scale)),
                          settings.but(tolerance=max(settings.tolerance, 1e-6)))
-    return seed.mean_gap, seed, seed.iterations
-
-
-def _carried_in_full_contact(problem, solution, target):
-    """Whether full contact carries the load ``target``; if so ``solution`` is set to it.
-
-    With every gap at the wall the mean gap cannot resolve the load any further, and
-    this state carries every ``P0`` at which no wall reaction is tensile,
-    ``p_el + P0 + v'(0) >= 0`` (adhesive jump-in).
-    """
-    p_el = solution.pressure - solution.mean_pressure
-    least = -problem.grid.comm.allreduce(
-        float(np.min(p_el + problem.interaction.derivative(0.0))), op=MPI.MIN)
-    if target < least:
-        return False
-    solution.pressure = p_el + target
-    solution.mean_pressure = problem.grid.mean(solution.pressure)
-    return True
-
-
-class _LoadSecant:
-    """The safeguarded secant of :func:`solve_load_by_mean_gap` on ``P(g_bar) - P0``.
-
-    Keeps the last state on the branch (the warm start of every trial), the points on
-    it, the bracket of the root once found, and the smallest mean gap at which every
-    contact let go.  A trial in which every contact has let go of the wall is not
-    followed (adhesion is hysteretic: a separated warm start never finds the contact
-    again) but bisected back towards the branch, down to ``1e-3 h0`` of mean gap: if
-    the branch ends there without carrying the load, that is pull-off, and the
-    separated state is returned with ``converged=False``.
-    """
-
-    def __init__(self, problem, target, state):
-        self.problem, self.target = problem, target
-        self.on_branch = state
-        self.points = []
-        self.lo = self.hi = None  # brackets: (gap, P - P0) with opposite signs
-        self.guard = self.touching(state)
-        self.release = None  # smallest mean gap tried at which every contact let go
-
-    def touching(self, state):
-        return self.problem.grid.comm.allreduce(int(np.count_nonzero(state.gap <= 0))) > 0
-
-    def next_gap(self, solution, f):
-        """The next mean gap to try after ``solution`` (``f = P - P0``), or None at pull-off."""
-        h0 = self.problem.gap_scale
-        if self.guard and not self.touching(solution):
-            # off the branch (overshoot, or past its end): bisect back towards it
-            self.release = solution.mean_gap if self.release is None \
-                else min(self.release, solution.mean_gap)
-            if self.release - self.on_branch.mean_gap <= 1e-3 * h0:
-                return None
-            return 0.5 * (self.on_branch.mean_gap + self.release)
-        self.on_branch = solution
-        self.points.append((solution.mean_gap, f))
-        if f > 0:
-            self.lo = (solution.mean_gap, f) if self.lo is None or solution.mean_gap > \
-                self.lo[0] else self.lo
-        else:
-            self.hi = (solution.mean_gap, f) if self.hi is None or solution.mean_gap < \
-                self.hi[0] else self.hi
-        gap_guess = solution.mean_gap + max(min(self._step(solution, f), h0), -h0)
-        lo, hi = self.lo, self.hi
-        if lo is not None and hi is not None and \
-                not (min(lo[0], hi[0]) < gap_guess < max(lo[0], hi[0])):
-            # regula falsi inside the bracket
-            gap_guess = lo[0] - lo[1] * (hi[0] - lo[0]) / (hi[1] - lo[1])
-        if self.release is not None:
-            gap_guess = min(gap_guess, 0.5 * (solution.mean_gap + self.release))
-        return gap_guess
-
-    def _step(self, solution, f):
-        """The secant's step in mean gap, before the safeguards."""
-        problem, h0 = self.problem, self.problem.gap_scale
-        if len(self.points) == 1:
-            # stiffness estimate of rough contact: dP/dg ~ -P / (0.5 h0)
-            slope = -max(abs(solution.mean_pressure), 1e-3 * problem.pressure_scale) / (0.5 * h0)
-        else:
-            (g1, f1), (g2, f2) = self.points[-2], self.points[-1]
-            slope = (f2 - f1) / (g2 - g1) if g2 != g1 else -problem.pressure_scale / h0
-        return -f / slope if slope < 0 else (0.5 * h0 if f > 0 else -0.5 * h0)
+    return seed, seed.iterations

@@ -18,8 +18,10 @@ Solver types
     that suits the problem (:func:`petgap.io.solver_registry.resolve`): on the
     pressure (``pcg-pressure``, :mod:`petgap.solvers.pressure_cg`) for non-adhesive
     load control, on the gap (``pcg-gap``, :mod:`petgap.solvers.gap_cg`) otherwise.
-    Adhesive load control is a secant iteration on the mean gap around warm-started
-    mean-gap solves, so that each step reports which branch it landed on.
+    Adhesive load control is one load-controlled gap solve started on a branch
+    (the previous step, else the hard wall's state at that load), which says
+    so when the load is beyond that branch's pull-off
+    (:func:`petgap.solvers.control_loops.solve_adhesive_load`).
 ``pcg-pressure``, ``pcg-gap``
     Force one formulation.  A cold ``pcg-pressure`` solve starts from the
     solution on a grid twice as coarse where the shape allows

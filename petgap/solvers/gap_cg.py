@@ -78,6 +78,8 @@ from petgap.solvers.settings import SolverSettings
 KEEP_FRACTION = 1.0
 #: With ``two_level``, ``beta`` is Polak-Ribiere+ (module docstring).
 POLAK_RIBIERE = True
+#: Iterations a load-controlled solve stays past pull-off before it says so (:func:`_pulled_off`).
+PULL_OFF_ITERATIONS = 3
 
 
 def _pass(kernel, *args):
@@ -146,6 +148,7 @@ class _State:
     """The scalars the iteration carries: multipliers, free-set counts, the recurrence."""
     lam: float = 0.0          # P0
     lam_f: float = 0.0        # P0 as estimated over the points off the wall (free-set test)
+    lam_free: float = 0.0     # P0 as estimated over F (the reported multiplier, load control)
     n_open: int = 0
     n_free: int = 0
     beta_ok: bool = False     # whether the recurrence may go on (False: steepest descent)
@@ -156,6 +159,7 @@ class _State:
     projected: int = 0        # steps whose projection acted
     released: int = 0         # restarts on a strong release (_released_strongly)
     capped: int = 0           # steps capped at the law's length scale
+    apart: int = 0            # consecutive iterations past pull-off (_pulled_off)
     cross: tuple = ()         # with two_level: sum_F z r_old, sum_F r_old, sum_F t (_beta)
 
 
@@ -280,9 +284,33 @@ def _multiplier(f, s, history):
     comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
     if not f.load:
         s.lam = -s_free / s.n_free if s.n_free > 0 else s.lam_f
+    s.lam_free = -s_free / s.n_free if s.n_free > 0 else s.lam
     if s.n_free > 0:
         return max(ext[0] + s.lam, ext[1] - s.lam) / f.problem.pressure_scale
     return 0.0
+
+
+def _pulled_off(f, s):
+    """Whether a tensile load has pulled the surfaces apart for good (load control).
+
+    The mean mode of the gap carries no elastic stress (``K`` has no ``q = 0``
+    term), so with every point off the wall its gradient is ``mean(v') + P0``.
+    Once every point is farther from the wall than the law's length scale and the
+    strongest attraction left, ``max v'(g)``, is weaker than the tension
+    ``-P0``, that gradient pushes the surfaces apart, the gaps grow, the
+    attraction fades, and no equilibrium lies ahead: the load is beyond pull-off
+    of the branch the solve was on.  Held for :data:`PULL_OFF_ITERATIONS`
+    iterations, so that a momentary excursion of an iterate is not taken for it.
+    Collective; a few passes, made only under a tensile load.
+    """
+    if not (f.load and f.adhesive and s.lam < 0):
+        return False
+    local = np.array([float(f.g.min()) if f.g.size else np.inf,
+                      -float(f.vp.max()) if f.g.size else np.inf])
+    f.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.MIN)
+    beyond = local[0] > f.cap and -local[1] < -s.lam
+    s.apart = s.apart + 1 if beyond else 0
+    return s.apart >= PULL_OFF_ITERATIONS
 
 
 def _precondition(f, s):
@@ -519,6 +547,9 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         if verdict:
             converged, reason = verdict == "converged_kkt", verdict
             break
+        if _pulled_off(f, s):
+            reason = "load_not_reached"  # every contact let go: beyond pull-off
+            break
         zshift, rz = _precondition(f, s)
         beta, zshift = _beta(f, s, rz, zshift)
         s.rz_old = rz
@@ -533,7 +564,11 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         tau, capped = _step_length(f, s, curv, slope, tmax)
         _advance(f, s, tau, capped or curv <= 0, refresh_interval)
 
-    f.pel += s.lam  # the total pressure, in place (no extra full-size array)
+    # the total pressure, in place (no extra full-size array); under load control with
+    # the free set's multiplier, the load the state carries: it balances the forces
+    # exactly (F_rep + F_att = A0 P0 to round-off), differs from the load by at most the
+    # KKT residual once converged, and shows the miss of a state that did not converge
+    f.pel += s.lam_free if f.load else s.lam
     solution = problem.make_solution(
         f.g, f.pel, f.g <= 0, control, converged=converged, reason=reason, solver="pcg-gap",
         iterations=it, operator_applications=problem.operator_applications - start_ops,

@@ -30,7 +30,7 @@ def test_pcg_resolves_to_the_formulation_that_suits(control, adhesive, periodic,
 @pytest.mark.parametrize("kind, control, adhesive, periodic, how", [
     ("pcg-pressure", "load", False, True, "direct"),
     ("pcg-pressure", "mean-gap", False, False, "indentation"),
-    ("pcg-gap", "load", True, True, "mean-gap secant"),
+    ("pcg-gap", "load", True, True, "from the hard wall"),
     ("pcg-gap", "load", False, True, "direct"),
     ("pcg-gap", "mean-gap", True, False, "padded cell"),
     ("blmvm", "mean-gap", False, True, "multiplier"),
