@@ -28,9 +28,7 @@ Solver types
 ``bncg``, ``blmvm``, ``bqnls``, ``gpcg``
     TAO's bound-constrained minimisers on the gap.
 
-How a control is reached (:func:`method`): adhesive load control on the gap is one
-load-controlled gap solve started from the hard wall's state at that load (or a sweep's
-previous step), mean-gap control by a TAO built-in a secant on
+How a control is reached (:func:`method`): mean-gap control by a TAO built-in a secant on
 the multiplier around load solves, and mean-gap control of the hard wall on a free
 boundary the indentation whose solution has that mean gap.  On a free boundary only the
 pressure solver works on the map itself; the solvers on the gap, which need the
@@ -130,21 +128,21 @@ def grid_precision(precision):
     return "single" if precision == "single" else "double"
 
 
-def method(kind, control, adhesive, periodic):
+def method(kind, control, periodic):
     """How the resolved type ``kind`` reaches ``control``.
 
     ``"padded cell"`` (a free boundary solved on its padded periodic cell by a solver on
     the gap), ``"indentation"`` (mean gap of the hard wall on a free boundary, through
-    the indentation), ``"from the hard wall"`` (adhesive load control on the gap, started
-    from the hard wall's state at the load unless warm),
-    ``"multiplier"`` (mean-gap control of a TAO built-in) or ``"direct"``.
+    the indentation), ``"multiplier"`` (mean-gap control of a TAO built-in) or
+    ``"direct"`` (the solver under the control itself; the gap solver takes adhesive
+    load control so, :func:`petgap.solvers.gap_start.cold_start`).
     """
     if not periodic and kind != "pcg-pressure":
         return "padded cell"
     if kind == "pcg-pressure":
         return "indentation" if control == "mean-gap" and not periodic else "direct"
     if kind == "pcg-gap":
-        return "from the hard wall" if control == "load" and adhesive else "direct"
+        return "direct"
     return "multiplier" if control == "mean-gap" else "direct"
 
 

@@ -86,18 +86,20 @@ def coarsening_factor(shape):
     return None
 
 
-def coarse_problem(problem):
+def coarse_problem(problem, precision=None):
     """The block-averaged problem on the coarse grid, or None if the shape has none.
 
     Collective.  Made anew on every call (the caller drops it after the start);
-    about ``1/f^2`` of the fine problem's memory.
+    about ``1/f^2`` of the fine problem's memory.  ``precision``: the coarse
+    grid's; by default single on a periodic cell (the pressure solver's start, see
+    the module docstring; the free half-space is double only), else the grid's.
     """
     grid = problem.grid
     f = coarsening_factor(grid.shape)
     if f is None:
         return None
-    # single precision on a periodic cell (the free half-space is double only)
-    precision = "single" if problem.half_space.periodic else grid.precision
+    if precision is None:
+        precision = "single" if problem.half_space.periodic else grid.precision
     shape = (grid.nx // f, grid.ny // f)
     whole = grid.comm.size > 1 and shape[0] * shape[1] <= WHOLE_POINTS
     try:

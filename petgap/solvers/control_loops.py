@@ -1,11 +1,8 @@
-"""Outer loops that reach one control through solves under another.
+"""The outer loop that reaches one control through solves under another.
 
-* Mean-gap control for TAO's built-ins, which minimise the load-control energy:
-  a secant on the multiplier ``log(P0)`` around inexact load solves
-  (:func:`solve_mean_gap_by_multiplier`).
-* Adhesive load control on the gap: one load-controlled gap solve started on a
-  branch (:func:`solve_adhesive_load`), which reports pull-off when no state on
-  that branch carries the load.
+Mean-gap control for TAO's built-ins, which minimise the load-control energy: a
+secant on the multiplier ``log(P0)`` around inexact load solves
+(:func:`solve_mean_gap_by_multiplier`).
 
 :func:`solve_as` runs a solver type the registry resolved
 (:mod:`petgap.io.solver_registry`) through the loop its control needs; the inner
@@ -19,7 +16,6 @@ from mpi4py import MPI
 from petgap.io.solver_registry import method
 from petgap.mechanics.problem import Load, MeanGap
 from petgap.solvers.convergence import Timer
-from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.solvers.tao import tao_solve
 
 
@@ -28,19 +24,16 @@ def solve_as(problem, control, kind, settings, initial=None, monitor=None):
 
     ``kind`` is a resolved solver type (never ``"pcg"``:
     :func:`petgap.io.solver_registry.resolve`), run through the loop its control needs
-    (:func:`petgap.io.solver_registry.method`): adhesive load control on the gap by
-    :func:`solve_adhesive_load`, mean-gap control of a TAO built-in by
+    (:func:`petgap.io.solver_registry.method`): mean-gap control of a TAO built-in by
     :func:`solve_mean_gap_by_multiplier`, anything else by one :func:`tao_solve`.
     ``initial`` is a warm start (a previous solution).  Collective.
     """
-    how = method(kind, control.kind, problem.interaction.adhesive, problem.half_space.periodic)
-    loops = {"from the hard wall": solve_adhesive_load, "multiplier": solve_mean_gap_by_multiplier,
-             "direct": tao_solve}
+    how = method(kind, control.kind, problem.half_space.periodic)
+    loops = {"multiplier": solve_mean_gap_by_multiplier, "direct": tao_solve}
     if how not in loops:
         raise ValueError(f"{kind} reaches {control.kind} control here by {how!r}, which "
                          f"petgap.solvers.dispatch.run runs, not a TAO solve")
     return loops[how](problem, control, kind, settings, initial, monitor)
-
 
 
 def solve_mean_gap_by_multiplier(problem, control, kind, settings, initial=None, monitor=None,
@@ -178,55 +171,3 @@ def _inner_tolerance(tolerance, error, load, slope, forcing=0.5):
     """
     wanted = forcing * max(abs(error), tolerance) * load / abs(slope)
     return min(tolerance, wanted)
-
-
-def solve_adhesive_load(problem, control, kind, settings, initial=None, monitor=None):
-    """Adhesive load control on the gap: one gap solve under the load, from a state on a branch.
-
-    Under load control the equilibria a user can reach are the local minima of
-    the enthalpy (elastic and interaction energy plus the load's work), which the
-    gap solver minimises directly; the branch is chosen by the start: a sweep's
-    previous step, else the same surface against a hard wall at the same load
-    (:func:`_branch_start`), from which a compressive load keeps the contact it
-    has and a tensile one peels it.  Where no state on that branch carries the
-    load -- below its pull-off -- the surfaces separate, which the solver
-    detects and reports as ``converged=False`` with reason ``"load_not_reached"``
-    (:func:`petgap.solvers.gap_cg._pulled_off`).  A jump into full contact is a
-    minimum like any other.  The iteration limit covers the seed's iterations.
-    """
-    timer = Timer()
-    target = float(control.mean_pressure)
-    start_ops = problem.operator_applications
-    state, seeded = _branch_start(problem, target, settings, initial)
-    budget = settings.max_iterations - seeded
-    if budget < 1:
-        solution = state
-        converged, reason, iterations = False, "max_iterations", seeded
-    else:
-        solution = tao_solve(problem, control, kind, settings.but(max_iterations=budget), state,
-                             monitor)
-        converged, reason = solution.converged, solution.reason
-        iterations = seeded + solution.iterations
-    result = problem.make_solution(
-        solution.gap, solution.pressure, solution.gap <= 0, control, converged=converged,
-        reason=reason, solver=kind, iterations=iterations,
-        operator_applications=problem.operator_applications - start_ops, wall_time=timer(),
-        history=solution.history)
-    result.negative_curvature_steps = getattr(solution, "negative_curvature_steps", 0)
-    result.step_counts = getattr(solution, "step_counts", None)
-    return result
-
-
-def _branch_start(problem, target, settings, initial):
-    """The state to start from, and the iterations it cost.
-
-    A sweep's previous step; else the same surface against a hard wall at the same
-    load (at least ``1e-3 h0' E*``), whose operator applications count as this
-    solve's (the half-space is shared).
-    """
-    if initial is not None:
-        return initial, 0
-    hard = problem.with_interaction(None)
-    seed = polonsky_keer(hard, Load(max(target, 1e-3 * problem.pressure_scale)),
-                         settings.but(tolerance=max(settings.tolerance, 1e-6)))
-    return seed, seed.iterations

@@ -137,7 +137,7 @@ def run(problem, control, settings, *, initial=None, monitor=None):
     case = case_of(problem, control, settings)
     registry.check(case)
     kind = case.kind
-    how = registry.method(kind, case.control, case.adhesive, case.periodic)
+    how = registry.method(kind, case.control, case.periodic)
     if how == "padded cell":
         return PADDED_CELL.solve(problem, control, kind, settings, initial=initial,
                                  monitor=monitor)

@@ -68,6 +68,7 @@ from petgap.parallel.collective import global_sums
 from petgap.parallel.log import GAP_CG_EVENT, event
 from petgap.solvers import _kernels as _k
 from petgap.solvers.convergence import Timer, judge
+from petgap.solvers.gap_start import cold_start
 from petgap.solvers.gap_two_level import CoarseTerm, block_for
 from petgap.solvers.settings import SolverSettings
 
@@ -508,7 +509,9 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         Tolerance (of the largest KKT stress violation over ``h0' E*``) and
         iteration limit.
     initial_gap : ndarray, optional
-        Warm start (copied and made feasible).
+        Warm start (copied and made feasible); without it the start is
+        :func:`petgap.solvers.gap_start.cold_start`'s (a coarse-grid solve, the
+        hard wall's state for adhesive load control, or the rigid approach).
     monitor : callable, optional
         ``monitor(iteration, residual)`` on every rank.
     refresh_interval : int
@@ -529,6 +532,13 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
     start_ops = problem.operator_applications
     if not load and target == 0.0:
         return _full_contact(problem, control, timer)
+    start = ""
+    if initial_gap is None:
+        def level(coarse_problem, coarse_control, coarse_settings):
+            return gap_cg(coarse_problem, coarse_control, coarse_settings,
+                          refresh_interval=refresh_interval, two_level=two_level)
+        initial_gap, start = cold_start(problem, control, settings, level)
+    start_time = timer()
     f = _Fields(problem, load, target, two_level)
     s = _State(lam=lam, lam_f=lam if load else 0.0)
     _start(f, initial_gap)
@@ -564,15 +574,16 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         tau, capped = _step_length(f, s, curv, slope, tmax)
         _advance(f, s, tau, capped or curv <= 0, refresh_interval)
 
-    # the total pressure, in place (no extra full-size array); under load control with
-    # the free set's multiplier, the load the state carries: it balances the forces
-    # exactly (F_rep + F_att = A0 P0 to round-off), differs from the load by at most the
-    # KKT residual once converged, and shows the miss of a state that did not converge
-    f.pel += s.lam_free if f.load else s.lam
+    # the total pressure, in place (no extra full-size array); an adhesive load-controlled
+    # state reports the free set's multiplier, the load it carries, as under mean-gap
+    # control: it balances the forces exactly (F_rep + F_att = A0 P0 to round-off),
+    # differs from the load by at most the KKT residual once converged, and shows the
+    # miss of a state past pull-off (the hard wall reports the load it was given)
+    f.pel += s.lam_free if f.load and f.adhesive else s.lam
     solution = problem.make_solution(
         f.g, f.pel, f.g <= 0, control, converged=converged, reason=reason, solver="pcg-gap",
         iterations=it, operator_applications=problem.operator_applications - start_ops,
-        wall_time=timer(), history=history)
+        wall_time=timer(), history=history, start=start, start_time=start_time)
     solution.negative_curvature_steps = s.negative_curvature
     solution.step_counts = dict(projected=s.projected, released=s.released, capped=s.capped,
                                 negative_curvature=s.negative_curvature)
