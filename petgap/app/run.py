@@ -26,6 +26,7 @@ from petgap.mechanics.interactions import HardWall
 from petgap.mechanics.problem import Indentation, Load, MeanGap
 from petgap.parallel.collective import root_decides
 from petgap.solvers.convergence import ResidualTrend
+from petgap.surfaces.measured import length_unit
 from petgap.parallel.log import get_logger
 
 
@@ -145,7 +146,7 @@ def _run_locked(scene, comm, output, resume, overwrite, petsc_args, log, strict)
                         "starting again", partial, output)
         with ResultFile.create(partial, comm, overwrite=True, provenance=provenance) as result:
             attrs = {"statistics": stats} if scene.output.statistics else None
-            result.write_coordinates(grid, scene.units.length)
+            result.write_coordinates(grid, _units(scene)["length"])
             if "topography" in scene.output.fields:
                 result.write_field("topography", grid, topography, attrs=attrs,
                                    units=_units(scene))
@@ -268,8 +269,14 @@ def scene_difference(attrs, scene):
 
 
 def _units(scene):
-    """The scene's units of lengths and pressures, as result files label fields."""
-    return {"length": scene.units.length, "pressure": scene.units.pressure}
+    """The scene's units of lengths and pressures, as result files label fields: a length
+    unit petgap converts in its one spelling ("um" for micron, um and \u00b5m), any other
+    as the scene gives it."""
+    try:
+        length = length_unit(scene.units.length)
+    except ValueError:
+        length = scene.units.length
+    return {"length": length, "pressure": scene.units.pressure}
 
 
 def _run_steps(model, output, log, resume):
@@ -337,7 +344,7 @@ def _write_step(model, output, step, solution):
     with _hold_sigterm(), ResultFile.open_for_append(output, comm) as result:
         group = result.begin_step(step.index, attrs=attrs)
         units = _units(scene)
-        result.write_coordinates(grid, scene.units.length, group=group)
+        result.write_coordinates(grid, _units(scene)["length"], group=group)
         if "gap" in fields:
             result.write_field("gap", grid, solution.gap, group=group, units=units)
         if "pressure" in fields:
