@@ -45,6 +45,7 @@ from petgap.parallel.collective import root_decides
 
 __all__ = ["SceneError", "Scene", "GridSection", "SurfaceSection", "MaterialSection",
            "InteractionSection", "ControlSection", "SolverSection", "OutputSection", "UnitsSection",
+           "ChecksSection",
            "schema_default",
            "describe_schema", "to_toml"]
 
@@ -891,6 +892,17 @@ class UnitsSection:
                         "(e.g. \"MPa\", \"Pa\"; \"1\": the scene's own unit)")
 
 
+@dataclass(frozen=True)
+class ChecksSection:
+    """What a run does with valid but implausible input: an rms slope beyond the
+    small-slope half-space or absurd for the units, a load beyond rough contact, contact
+    patches a few pixels across (:mod:`petgap.mechanics.plausibility`)."""
+    plausibility: str = key(Choice("warn", "error", "off"), "warn",
+                            "implausible input (the number, the limit and what to do): a "
+                            "warning, an error before anything is solved (a patch size: "
+                            "after the step that shows it), or nothing")
+
+
 def _section(cls, doc=None):
     return field(default=None, metadata={"section": cls, "doc": doc or cls.__doc__})
 
@@ -920,6 +932,7 @@ class Scene:
     solver: SolverSection = _section(SolverSection)
     output: OutputSection = _section(OutputSection)
     units: UnitsSection = _section(UnitsSection)
+    checks: ChecksSection = _section(ChecksSection)
     text: str = ""
     path: str = None
     base_dir: str = "."
