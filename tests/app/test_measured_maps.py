@@ -136,3 +136,28 @@ def test_check_refuses_implausible_input_when_the_scene_says_so(comm, mpi_tmp_pa
     assert main(["check", str(path)]) == 2
     if comm.rank == 0:
         assert "load P0 = 5 gives a contact fraction" in capsys.readouterr().err
+
+
+def test_pressure_maps_clip_a_hot_pixel_and_axes_carry_units():
+    from petgap.app.overview import PRESSURE_PERCENTILE, _pressure_scale, unit_label
+    values = np.full((50, 50), 0.01)
+    values[:25] = 0.0
+    values[3, 40] = 100.0                      # one hot pixel
+    kwargs, label = _pressure_scale(values, "pressure $p$")
+    assert kwargs == {"vmin": 0.0, "vmax": pytest.approx(0.01)}
+    assert f"clipped at its {PRESSURE_PERCENTILE:g}th percentile (max 100)" in label
+    assert unit_label("$x$", "um") == "$x$ (um)"
+    assert unit_label("PSD", "nm", 4) == "PSD (nm$^{4}$)"
+    assert unit_label("$x$", "1") == "$x$ (scene units)"
+
+
+def test_post_tables_carry_the_files_unit(comm, mpi_tmp_path):
+    from petgap.app.post import main as post_main
+    path = write(comm, mpi_tmp_path / "map.toml", scene_text(kind="none").replace(
+        "values = [0.002]\n", ""))
+    run_scene(load_scene(path, comm), comm, mpi_tmp_path / "map.h5")
+    assert post_main([str(mpi_tmp_path / "map.h5"), "-o", str(mpi_tmp_path / "post")]) == 0
+    if comm.rank == 0:
+        table = (mpi_tmp_path / "post" / "surface-statistics.csv").read_text().splitlines()
+        header, row = table[0].split(","), table[1].split(",")
+        assert row[header.index("length_unit")] == "nm"
