@@ -104,7 +104,7 @@ def _needs(scene, comm, steps, need):
         warnings.insert(0, seam)
     if scene.surface.kind == "file" and not periodic:
         warnings.append("free boundary: contact gathers at the map's edges, where nothing "
-                        "outside holds the surface up (docs/conventions.md)")
+                        "outside holds the surface up (README, \"Your own measured map\")")
     if scene.checks.plausibility == "error":
         plausibility.report(warnings[1 if seam else 0:], "error", scene.path or "scene")
     lines += [f"warning: {w}" for w in warnings]
@@ -113,7 +113,8 @@ def _needs(scene, comm, steps, need):
                  f"rank{'s' if comm.size > 1 else ''} ({len(steps)} step"
                  f"{'' if len(steps) == 1 else 's'} planned)")
     if steps:
-        lines.append(f"time: about {_duration(seconds)} per step, {_duration(seconds * len(steps))} "
+        about = lambda t: ("about " if t >= 1 else "") + _duration(t)  # noqa: E731
+        lines.append(f"time: {about(seconds)} per step, {about(seconds * len(steps))} "
                      f"for the {len(steps)} on {comm.size} rank{'s' if comm.size > 1 else ''} "
                      f"(an order of magnitude, from docs/benchmarks.md's model of a 2-core "
                      f"workstation; planning FFTW's transforms comes on top)")
