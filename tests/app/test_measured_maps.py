@@ -127,7 +127,7 @@ def test_check_tells_what_run_will_need(comm, mpi_tmp_path, capsys):
     assert "use the finite-difference (inside the map) h0' = 0.166 (free boundary)" in out
     assert "# loads: P0 = 0.00083 to 0.0083 give a contact fraction c = 0.01 to 0.1" in out
     assert "# warning: load P0 = 5 gives a contact fraction" in out
-    assert "# memory: about" in out and "# time: about" in out
+    assert "# memory: about" in out and "# time: " in out and " per step" in out
 
 
 def test_check_refuses_implausible_input_when_the_scene_says_so(comm, mpi_tmp_path, capsys):
