@@ -31,6 +31,7 @@ from petgap.io import solver_registry as registry
 from petgap.io.scene import Scene, SceneError
 from petgap.mechanics.free_half_space import FreeHalfSpace
 from petgap.mechanics.half_space import ElasticHalfSpace
+from petgap.mechanics import plausibility
 from petgap.mechanics.interactions import check_resolution, from_scene
 from petgap.mechanics.problem import ContactProblem
 from petgap.parallel.grid import Grid, check_decomposition
@@ -68,6 +69,27 @@ def seam_warning(stats, path):
             f"is a cliff in the surface: solve it on a free boundary (surface.periodic = "
             f"false), remove the trend (surface.detrend = \"height\" or \"curvature\") or "
             f"cut the map so that its edges match")
+
+
+def used_rms_slope(stats, periodic):
+    """The ``h0'`` the solve's scales and the analysis use: spectral on a periodic cell, by
+    finite differences inside the map on a free boundary (where the cell's seam is no part
+    of the surface; :class:`petgap.mechanics.problem.ContactProblem`)."""
+    return stats.rms_slope if periodic or stats.rms_slope_fd_inner is None \
+        else stats.rms_slope_fd_inner
+
+
+def plausibility_findings(scene, rms_slope):
+    """What :mod:`petgap.mechanics.plausibility` finds implausible about a scene whose
+    surface has the rms slope ``rms_slope``: its slope, and each load it imposes."""
+    findings = plausibility.slope_findings(
+        rms_slope, None if scene.units.length == "1" else scene.units.length)
+    loads = [step.control.value for step in protocol.plan(scene)
+             if step.control is not None and step.control.kind == "load"]
+    for load in sorted(set(loads), reverse=True)[:1]:    # the largest load speaks for all
+        findings += plausibility.load_findings(load, rms_slope,
+                                               scene.material.contact_modulus)
+    return findings
 
 
 def load_scene(path, comm=None):
@@ -276,6 +298,48 @@ def check_size(scene, comm, solve=True):
         f"or raise the limit")
 
 
+#: The time model of ``petgap check`` (docs/benchmarks.md, "A model for cluster runs"):
+#: seconds per point and level of an FFT pair, FFT pairs and seconds per point of an
+#: iteration of the pressure solver, and its iterations ``a + b log2(n)^2`` on a periodic
+#: cell, all fitted on a 2-core workstation (``benchmarks/model.py``).
+SECONDS_PER_POINT_LEVEL = 6.2e-10
+PAIRS_PER_ITERATION = 2.4
+SECONDS_PER_POINT_ITERATION = 1.0e-9
+ITERATIONS = (5.4, 0.077)
+#: The coarse start's share on top of the fine iterations (docs/design.md, "The coarse-grid
+#: start": its levels cost about a third of the fine solve).
+START_FACTOR = 1.3
+#: How much dearer a step is than the periodic pressure solve of the same grid: on a free
+#: boundary (README: 4-7 times), with adhesion (the gap solver's iterations at about
+#: seven times the pressure solver's time on the benchmark surface at 512^2), and under load
+#: control with adhesion (a secant on the mean gap: a few gap solves).
+FREE_FACTOR = 5.5
+ADHESIVE_FACTOR = 7.0
+ADHESIVE_LOAD_FACTOR = 3.0
+#: The efficiency of each further rank (two ranks sharing this machine's memory: 0.41).
+RANK_EFFICIENCY = 0.5
+
+
+def estimated_seconds(scene, ranks):
+    """An order-of-magnitude estimate of one step's solve time on ``ranks`` ranks (see the
+    constants above), or 0 for a scene without steps."""
+    steps = protocol.plan(scene)
+    if not steps:
+        return 0.0
+    points = scene.grid.nx * scene.grid.ny
+    n = math.sqrt(points)
+    iterations = ITERATIONS[0] + ITERATIONS[1] * math.log2(n) ** 2
+    per_iteration = (PAIRS_PER_ITERATION * SECONDS_PER_POINT_LEVEL * math.log2(points)
+                     + SECONDS_PER_POINT_ITERATION) * points
+    seconds = START_FACTOR * iterations * per_iteration
+    if not scene.surface.periodic:
+        seconds *= FREE_FACTOR
+    if any(step.adhesive for step in steps):
+        seconds *= ADHESIVE_FACTOR * (ADHESIVE_LOAD_FACTOR if scene.control.kind == "load"
+                                      else 1.0)
+    return seconds / (1 + (ranks - 1) * RANK_EFFICIENCY)
+
+
 def _is_number(text):
     try:
         float(text)
@@ -306,6 +370,16 @@ def preflight(scene, comm, *, petsc_args=(), strict=False, resolution_check=None
         check_resolution(law, min(g.size[0] / g.nx, g.size[1] / g.ny),  # as the Grid does
                          scene.material.contact_modulus, "error")
     return steps, need
+
+
+def statistics_of(grid, topography):
+    """Mean, rms height, slope and curvature of a surface, spectral and by finite
+    differences (across the cell's edges and inside the map); collective."""
+    stats = surface_statistics(grid, topography)
+    periodic, inner = finite_difference_slopes(grid, topography)
+    curvature = finite_difference_curvature(grid, topography)
+    return dataclasses.replace(stats, rms_slope_fd=periodic, rms_slope_fd_inner=inner,
+                               rms_curvature_fd_inner=curvature)
 
 
 @dataclass
@@ -353,11 +427,7 @@ class Model:
     @functools.cached_property
     def statistics(self):
         """Mean, rms height, slope and curvature of the surface (collective on first use)."""
-        stats = surface_statistics(self.grid, self.topography)
-        periodic, inner = finite_difference_slopes(self.grid, self.topography)
-        curvature = finite_difference_curvature(self.grid, self.topography)
-        return dataclasses.replace(stats, rms_slope_fd=periodic, rms_slope_fd_inner=inner,
-                                   rms_curvature_fd_inner=curvature)
+        return statistics_of(self.grid, self.topography)
 
     @property
     def solve_options(self):
@@ -444,6 +514,9 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
         seam = seam_warning(model.statistics, scene.surface.path)
         if seam:
             log.warning(seam)
+    plausibility.report(
+        plausibility_findings(scene, used_rms_slope(model.statistics, scene.surface.periodic)),
+        scene.checks.plausibility, scene.path or "scene", log, comm)
     if not model.steps:
         return model
     modulus = scene.material.contact_modulus

@@ -32,7 +32,9 @@ from petgap.analysis.of_solution import contact_statistics_of
 from petgap.io import solver_registry as registry
 from petgap.mechanics import (ContactProblem, ElasticHalfSpace, ExponentialAdhesion,
                               FreeHalfSpace, HardWall, Load, MeanGap)
+from petgap.mechanics import plausibility
 from petgap.mechanics.interactions import LAWS
+from petgap.mechanics.interactions.resolution import resolution_report
 from petgap.parallel import Grid
 from petgap.solvers import solve
 
@@ -194,9 +196,12 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
     body = ElasticHalfSpace(grid, contact_modulus) if periodic else \
         FreeHalfSpace(grid, contact_modulus)
     problem = ContactProblem(grid, grid.local_part(heights).copy(), body, interaction)
+    _check_plausible(problem, control, interaction, contact_modulus, comm)
     solution = solve(problem, control, solver=solver, tolerance=tolerance,
                      max_iterations=max_iterations, options=options)
     stats = contact_statistics_of(problem, solution)
+    plausibility.report(plausibility.patch_findings(stats.mean_diameter, max(dx, dy)),
+                        what="petgap.contact", comm=comm)
     if fields == "global":
         gap, pressure, rows = (_allgather_rows(grid, solution.gap),
                                _allgather_rows(grid, solution.pressure), slice(0, nx))
@@ -215,6 +220,22 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
 
 
 # ------------------------------------------------------------------ checks
+def _check_plausible(problem, control, interaction, contact_modulus, comm):
+    """Warn (rank 0, once) about an implausible slope or load and an unresolved
+    interaction, as ``petgap run`` does (:mod:`petgap.mechanics.plausibility`)."""
+    findings = plausibility.slope_findings(problem.rms_slope)
+    if control.kind == "load":
+        findings += plausibility.load_findings(control.value, problem.rms_slope,
+                                               contact_modulus)
+    if interaction.adhesive:
+        grid = problem.grid
+        report = resolution_report(interaction, min(grid.dx, grid.dy), contact_modulus)
+        if not report["resolved"]:
+            findings.append(report["message"])
+    plausibility.report(findings, what="petgap.contact", comm=comm)
+
+
+
 def _agreed(comm, check):
     """``check()`` on every rank; its value if every rank passed it with the same arguments.
 

@@ -34,7 +34,11 @@ from petsc4py import PETSc
 
 from petgap.app import run, study
 from petgap.app.argtypes import root_parser
-from petgap.app.build import load_scene, preflight
+from petgap.app.build import (estimated_seconds, load_scene, make_grid, make_surface,
+                              plausibility_findings, preflight, seam_warning, statistics_of,
+                              used_rms_slope)
+from petgap.app.run import _duration
+from petgap.mechanics import plausibility
 from petgap.io.scene import describe_schema
 from petgap.parallel.collective import root_decides
 from petgap.parallel.log import configure, report_failure
@@ -48,25 +52,73 @@ EXIT_USAGE = 2
 def _check(args, comm, petsc_args):
     """``petgap check``: every check ``petgap run`` makes before it solves, in its order
     (the scene, :func:`petgap.app.build.preflight`, the topography file), and what the
-    scene resolves to, with the estimated peak memory per rank."""
+    scene resolves to; then what the run will need (:func:`_needs`)."""
     scene = load_scene(args.scene, comm)
     steps, need = preflight(scene, comm)
     found = root_decides(comm, lambda: check_topography_file(scene, solved=bool(steps))) \
         if scene.surface.kind == "file" else None
+    lines = _needs(scene, comm, steps, need)
     if comm.rank == 0:
         for name, section in scene.to_dict().items():
             print(f"[{name}]")
             for k, v in section.items():
                 if v is not None:
-                    print(f"{k} = {json.dumps(v)}")
+                    print(f"{k} = {json.dumps(v, ensure_ascii=False)}")
             print()
         if found:
             print(f"# topography: {found}")
-        print(f"# memory: about {_in_units(need)} per rank at its peak on {comm.size} "
-              f"rank{'s' if comm.size > 1 else ''} ({len(steps)} step"
-              f"{'' if len(steps) == 1 else 's'} planned)")
+        print("\n".join(f"# {line}" for line in lines))
         print(f"# {args.scene}: valid", flush=True)
     return 0
+
+
+def _needs(scene, comm, steps, need):
+    """What a run of ``scene`` will need and meet, as lines (the same on every rank;
+    collective): the surface's ``h0`` and ``h0'`` (spectral and by finite differences, and
+    which one the solve and the analysis use), the loads that give ``c = 0.01-0.1``, the
+    warnings ``run`` gives (a seam, the slope, the loads; with ``checks.plausibility =
+    "error"`` they are raised), the peak memory and an estimate of the time."""
+    grid = make_grid(scene, comm, planner="estimate")
+    stats = statistics_of(grid, make_surface(scene, grid))
+    del grid
+    periodic = scene.surface.periodic
+    slope = used_rms_slope(stats, periodic)
+    units = scene.units
+    length = "" if units.length == "1" else f" {units.length}"
+    pressure = "" if units.pressure == "1" else f" {units.pressure}"
+    lines = [f"surface: h0 = {stats.rms_height:.4g}{length}; h0' = {stats.rms_slope:.4g} "
+             f"spectral, {stats.rms_slope_fd_inner:.4g} by finite differences inside the map "
+             f"({stats.rms_slope_fd:.4g} across the cell's edges); the solve and the analysis "
+             f"use the {'spectral' if periodic else 'finite-difference (inside the map)'} "
+             f"h0' = {slope:.4g} ({'periodic' if periodic else 'free boundary'})"]
+    if steps:
+        lo, hi = plausibility.load_range(slope, scene.material.contact_modulus)
+        lines.append(f"loads: P0 = {lo:.3g} to {hi:.3g}{pressure} give a contact fraction c = "
+                     f"{plausibility.CONTACT_FRACTIONS[0]:g} to "
+                     f"{plausibility.CONTACT_FRACTIONS[1]:g} (c = kappa_rep P0 / (h0' E*), "
+                     f"kappa_rep ~ {plausibility.KAPPA_REP:g}: the paper's Eq. 3)")
+    warnings = plausibility_findings(scene, slope)
+    seam = seam_warning(stats, scene.surface.path) if scene.surface.kind == "file" and \
+        periodic else ""
+    if seam:
+        warnings.insert(0, seam)
+    if scene.surface.kind == "file" and not periodic:
+        warnings.append("free boundary: contact gathers at the map's edges, where nothing "
+                        "outside holds the surface up (README, \"Your own measured map\")")
+    if scene.checks.plausibility == "error":
+        plausibility.report(warnings[1 if seam else 0:], "error", scene.path or "scene")
+    lines += [f"warning: {w}" for w in warnings]
+    seconds = estimated_seconds(scene, comm.size)
+    lines.append(f"memory: about {_in_units(need)} per rank at its peak on {comm.size} "
+                 f"rank{'s' if comm.size > 1 else ''} ({len(steps)} step"
+                 f"{'' if len(steps) == 1 else 's'} planned)")
+    if steps:
+        about = lambda t: ("about " if t >= 1 else "") + _duration(t)  # noqa: E731
+        lines.append(f"time: {about(seconds)} per step, {about(seconds * len(steps))} "
+                     f"for the {len(steps)} on {comm.size} rank{'s' if comm.size > 1 else ''} "
+                     f"(an order of magnitude, from docs/benchmarks.md's model of a 2-core "
+                     f"workstation; planning FFTW's transforms comes on top)")
+    return lines
 
 
 def _in_units(nbytes):

@@ -18,6 +18,20 @@ from petgap.app.figures import pyplot
 FIGURE_MAP_PIXELS = 512
 #: PSD bins below this fraction of the largest are round-off (not drawn).
 ROUND_OFF_PSD = 1e-12
+#: The pressure map's colour scale ends at this percentile of the pressures in contact: one
+#: hot pixel (a peak of a rough map, a corner of a flat punch, the edge of a free map) bears
+#: many times the pressure of the rest and would otherwise leave the map one colour.
+PRESSURE_PERCENTILE = 99.0
+
+
+def unit_label(symbol, unit, power=1):
+    """An axis label with its unit: ``$x$ (nm)``, ``PSD (nm$^4$)``; ``"1"`` (the scene's own
+    units) reads "scene units"."""
+    if unit in (None, "", "1"):
+        return f"{symbol} (scene units)"
+    if power == 1:
+        return f"{symbol} ({unit})"
+    return f"{symbol} ({unit}$^{{{power}}}$)"
 
 
 @dataclass
@@ -27,6 +41,8 @@ class StepMaps:
     maps: dict
     contact_fraction: float
     title: str
+    #: ``(length unit, pressure unit)`` of the fields (the result file's).
+    units: tuple = ("1", "1")
 
     def save(self, path):
         """The maps as ``.npz``: ``<name>`` block means, ``<name>_counts`` pixels per block,
@@ -52,9 +68,12 @@ def draw_maps(step_maps, path):
     fig, axes = plt.subplots(nrow, ncol, figsize=(5.2 * ncol, 4.6 * nrow), squeeze=False)
     for ax in axes.flat[len(panels):]:
         ax.set_visible(False)
+    length, pressure = step_maps.units
     for ax, (name, label, cmap) in zip(axes.flat, panels):
         m = step_maps.maps[name]
         kwargs = {"vmin": 0.0, "vmax": 1.0} if name == "contact" else {}
+        if name == "pressure":
+            kwargs, label = _pressure_scale(m.values, label)
         image = ax.imshow(m.values.T, origin="lower", extent=m.extent, cmap=cmap,
                           interpolation="nearest", aspect="equal", **kwargs)
         if name == "contact" and 0 < step_maps.contact_fraction < 1:
@@ -64,13 +83,30 @@ def draw_maps(step_maps, path):
             label = f"contact, c = {step_maps.contact_fraction:.4g} (edge in red)"
         blocks = "" if m.factor == 1 else f"  [{m.factor}x{m.factor} block means]"
         ax.set_title(label + blocks, fontsize=9)
-        ax.set_xlabel("$x$")
-        ax.set_ylabel("$y$")
-        fig.colorbar(image, ax=ax, shrink=0.85)
+        ax.set_xlabel(unit_label("$x$", length))
+        ax.set_ylabel(unit_label("$y$", length))
+        bar = fig.colorbar(image, ax=ax, shrink=0.85,
+                           extend="max" if name == "pressure" and "vmax" in kwargs else "neither")
+        if name != "contact":
+            bar.set_label(unit_label(label.split(",")[0].split(" (")[0],
+                                     pressure if name == "pressure" else length))
     fig.suptitle(step_maps.title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _pressure_scale(values, label):
+    """The pressure map's colour range, from 0 to :data:`PRESSURE_PERCENTILE` of the
+    pressures in contact when the largest lies far above it, and the title saying so."""
+    bearing = values[np.isfinite(values) & (values > 0)]
+    if bearing.size == 0:
+        return {}, label
+    top = float(np.percentile(bearing, PRESSURE_PERCENTILE))
+    if not 0 < top < float(bearing.max()):
+        return {}, label
+    return {"vmin": 0.0, "vmax": top}, (f"{label}, clipped at its {PRESSURE_PERCENTILE:g}th "
+                                        f"percentile (max {float(bearing.max()):.3g})")
 
 
 @dataclass
@@ -118,6 +154,8 @@ def draw_sweep(rows, fits, path, title):
     plt = pyplot()
     hard = [r for r in rows if r["interaction"] == "hard-wall"]
     sticky = [r for r in rows if r["interaction"] != "hard-wall"]
+    length, pressure = (rows[0].get("length_unit", "1"), rows[0].get("pressure_unit", "1")) \
+        if rows else ("1", "1")
     ncol = 3 if sticky else 2
     fig, axes = plt.subplots(1, ncol, figsize=(4.6 * ncol, 4.0))
     ax = axes[0]
@@ -147,8 +185,8 @@ def draw_sweep(rows, fits, path, title):
         gs = np.linspace(min(g), max(g), 50)
         ax.semilogy(gs, law.load(gs), "k--", lw=1,
                     label=rf"$\exp(-\bar g / \gamma h_0)$, $\gamma$ = {law.gamma:.3g}")
-    ax.set_xlabel(r"mean gap $\bar g$")
-    ax.set_ylabel(r"mean pressure $P_0$")
+    ax.set_xlabel(unit_label(r"mean gap $\bar g$", length))
+    ax.set_ylabel(unit_label(r"mean pressure $P_0$", pressure))
     ax.set_title("load against mean gap", fontsize=9)
     if hard:
         ax.legend(fontsize=7)
@@ -158,8 +196,8 @@ def draw_sweep(rows, fits, path, title):
         load = [_num(r["mean_pressure"]) for r in sticky]
         ax.plot(load, [-_num(r["F_att"]) for r in sticky], "s", mfc="none",
                 label=r"$-F_{att}$ (all pixels)")
-        ax.set_xlabel(r"mean pressure $P_0$")
-        ax.set_ylabel(r"$-F_{att}$")
+        ax.set_xlabel(unit_label(r"mean pressure $P_0$", pressure))
+        ax.set_ylabel(r"$-F_{att}$ (force per cell: pressure $\times$ length$^2$)")
         twin = ax.twinx()
         twin.plot(load, [_num(r["inv_kappa_att"]) for r in sticky], "^", color="tab:orange",
                   mfc="none", label=r"$1/\kappa_{att}$")
@@ -184,6 +222,7 @@ class SurfaceView:
     model_label: str
     topography: object       # its :class:`petgap.analysis.Map` (values on the root only)
     row: dict = None         # the surface-statistics table row
+    length_unit: str = "1"   # of heights and lengths (the result file's)
 
 
 def draw_psd(view, path, title):
@@ -201,8 +240,11 @@ def draw_psd(view, path, title):
     if view.model is not None:
         use = view.model > 0
         ax.loglog(view.q[use], view.model[use], "k--", lw=1, label=view.model_label)
-    ax.set_xlabel(r"wavevector $|q|$")
-    ax.set_ylabel(r"PSD $C(q)$ (area $\times$ length$^2$)")
+    unit = view.length_unit
+    ax.set_xlabel(r"wavevector $|q|$" + ("" if unit in ("", "1") else f" (1/{unit})")
+                  + (" (1/scene length)" if unit in ("", "1") else ""))
+    ax.set_ylabel(unit_label(r"PSD $C(q)$", unit, 4) if unit not in ("", "1") else
+                  r"PSD $C(q)$ (scene length$^4$)")
     s = view.statistics
     ax.set_title(f"{title}\n$h_0$ = {s.rms_height:.4g}, $h_0'$ = {s.rms_slope:.4g}, "
                  f"$h_0''$ = {s.rms_curvature:.4g} (spectral)", fontsize=9)
@@ -212,7 +254,7 @@ def draw_psd(view, path, title):
     plt.close(fig)
 
 
-def draw_patches(series, path, title):
+def draw_patches(series, path, title, length_unit="1"):
     """Patch-area distributions (number of patches per logarithmic area bin), one per step."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(5.5, 4.2))
@@ -224,7 +266,7 @@ def draw_patches(series, path, title):
         keep = counts > 0
         ax.loglog(centres[keep], counts[keep] / np.diff(edges)[keep], "o-", ms=3, mfc="none",
                   label=f"{label}: {patches.count} patches")
-    ax.set_xlabel("patch area")
+    ax.set_xlabel(unit_label("patch area", length_unit, 2))
     ax.set_ylabel("patches per unit area (density)")
     ax.set_title(title, fontsize=9)
     if ax.get_legend_handles_labels()[0]:

@@ -134,6 +134,7 @@ from petgap.mechanics.interactions import ExponentialAdhesion, LAWS, law_class  
 from petgap.parallel.collective import root_decides  # noqa: E402
 from petgap.parallel.grid import DecompositionError, Grid  # noqa: E402
 from petgap.parallel.log import configure, report_failure  # noqa: E402
+from petgap.surfaces.measured import length_unit  # noqa: E402
 from petgap.surfaces.self_affine import psd_shape  # noqa: E402
 from petgap.surfaces.statistics import (finite_difference_curvature,  # noqa: E402
                                         finite_difference_slopes, radial_psd, statistics)
@@ -156,7 +157,8 @@ ROUND_OFF_WARN = 0.01
 
 #: Table columns, in order.
 COLUMNS = [
-    "file", "step", "chain", "reference_step", "nx", "ny", "dx", "dy", "lambda_min",
+    "file", "step", "chain", "reference_step", "nx", "ny", "dx", "dy", "length_unit",
+    "pressure_unit", "lambda_min",
     "lambda_max", "interaction",
     "work_of_adhesion", "range", "rms_slope", "rms_slope_source", "contact_modulus",
     "gap_tolerance", "contact_pixels", "c", "A_rep", "P_rep", "P_pixel_edges", "d_rep", "g0",
@@ -183,7 +185,7 @@ PATCH_TABLE = "patches.csv"
 PATCH_COLUMNS = ["file", "step", "patch", "pixels", "area", "perimeter_pixel_edges",
                  "first_pixel"]
 SURFACE_STEM = "surface-statistics"
-SURFACE_COLUMNS = ["file", "nx", "ny", "dx", "dy", "mean", "rms_height", "rms_slope",
+SURFACE_COLUMNS = ["file", "nx", "ny", "dx", "dy", "length_unit", "mean", "rms_height", "rms_slope",
                    "rms_curvature", "rms_slope_fd", "rms_slope_fd_inner",
                    "rms_curvature_fd_inner", "kind", "hurst", "lambda_min", "lambda_max"]
 
@@ -459,8 +461,10 @@ def analyse_step(result, index, args, grids, comm, log, surface=None):
     meta = {"lambda_min_a0": lmin / dx if lmin else None, "rho": rho, "reference_step": ref_step,
             "force_by_gap": force_by_gap if adhesive and usable else None,
             "solve": solve_identity(result, index, attrs, kind, w, rho)}
+    # no exponent is told where no range qualified to fit it (the warning above says so)
     finite = [k for k in ("exponent", "exponent_fit_range")
-              if row[k] is not None and math.isfinite(row[k])]
+              if row[k] is not None and math.isfinite(row[k])
+              and not (fit_note and not math.isfinite(row.get("fit_range_x_min") or math.nan))]
     log.info("%s: c = %.4g, P_rep = %.6g (pixel edges %.6g), d_rep = %.4g, g0 = %.4g%s%s", where,
              c, stats.perimeter, stats.pixel_edge_length, stats.mean_diameter, g0,
              f", exponent {row['exponent']:.3f} over x = {row['power_law_x_min']:.3g} .. "
@@ -470,7 +474,9 @@ def analyse_step(result, index, args, grids, comm, log, surface=None):
              if "exponent_fit_range" in finite else "")
     title = f"{result.path}, {name}: {kind}" + (
         f", {row['control']} = {row['control_value']:.4g}" if row["control"] else "")
-    step_maps = overview.StepMaps(maps, c, title) if comm.rank == 0 else None
+    row.update(units_of(attrs))
+    step_maps = overview.StepMaps(maps, c, title, (row["length_unit"], row["pressure_unit"])) \
+        if comm.rank == 0 else None
     return StepResult(row=row, distribution=dist, x=x, y=y, adhesive=adhesive, meta=meta,
                       patches=patches, maps=step_maps)
 
@@ -516,6 +522,18 @@ def solve_identity(result, index, attrs, kind, w, rho):
               if not k.startswith(("interaction.", "control.", "output."))}
     return ("solve", json.dumps(shared, sort_keys=True, default=str), kind, w, rho, control,
             float(value))
+
+
+def units_of(attrs):
+    """``{"length_unit": ..., "pressure_unit": ...}`` of a result file (its scene's
+    ``units``; "1", the scene's own units, in files without them)."""
+    length, _ = attrs.find(["units.length"], "length unit", required=False, kind=str)
+    pressure, _ = attrs.find(["units.pressure"], "pressure unit", required=False, kind=str)
+    try:
+        length = length_unit(length) if length and length != "1" else length
+    except ValueError:
+        pass    # a unit petgap does not convert: labelled as the scene gives it
+    return {"length_unit": length or "1", "pressure_unit": pressure or "1"}
 
 
 def file_attributes(result):
@@ -583,9 +601,9 @@ def analyse_surface(result, args, grids, comm):
            "hurst": attrs.find(["surface.hurst"], "Hurst exponent", required=False)[0],
            "lambda_min": attrs.find(["surface.lambda_min"], "lambda_min", required=False)[0],
            "lambda_max": attrs.find(["surface.lambda_max"], "lambda_max", required=False)[0],
-           "psd": spectrum}
+           "psd": spectrum, "length_unit": units_of(attrs)["length_unit"]}
     return overview.SurfaceView(statistics=stats, q=q, psd=psd, model=model, model_label=label,
-                                topography=topo_map, row=row)
+                                topography=topo_map, row=row, length_unit=row["length_unit"])
 
 
 def _grid(grids, shape, dx, dy, comm, where):
@@ -999,7 +1017,8 @@ def _run(args, inputs, comm, log):
             if view is not None and not steps:
                 name = f"{stem}-topography.{fmt}"
                 overview.draw_maps(overview.StepMaps({"topography": view.topography}, math.nan,
-                                                     f"{path}: topography"), d / name)
+                                                     f"{path}: topography",
+                                                     (view.length_unit, "1")), d / name)
                 add(name, f"{path}: topography", "maps", path)
             for r in steps:
                 base = f"{stem}-step{r.row['step']:04d}-maps"
@@ -1015,7 +1034,8 @@ def _run(args, inputs, comm, log):
             if steps:
                 name = f"{stem}-patches.{fmt}"
                 overview.draw_patches([(f"step {r.row['step']}", r.patches) for r in steps],
-                                      d / name, f"{path}: contact patch areas")
+                                      d / name, f"{path}: contact patch areas",
+                                      steps[0].row["length_unit"])
                 add(name, f"{path}: contact patch-area distributions", "patches", path)
         if results:
             patch_rows = [dict(file=r.row["file"], step=r.row["step"], **row)

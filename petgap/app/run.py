@@ -17,15 +17,18 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from petgap.analysis.of_solution import contact_statistics_of
 from petgap.app.build import build, load_scene
 from petgap.io.results import (OutputPathError, ResultExistsError, ResultFile,
                                 check_free_space, existing_result, output_path_error)
 from petgap.io.lock import ResultLock, lock_path
 from petgap.io.scene import schema_default
+from petgap.mechanics import plausibility
 from petgap.mechanics.interactions import HardWall
 from petgap.mechanics.problem import Indentation, Load, MeanGap
 from petgap.parallel.collective import root_decides
 from petgap.solvers.convergence import ResidualTrend
+from petgap.surfaces.measured import length_unit
 from petgap.parallel.log import get_logger
 
 
@@ -145,7 +148,7 @@ def _run_locked(scene, comm, output, resume, overwrite, petsc_args, log, strict)
                         "starting again", partial, output)
         with ResultFile.create(partial, comm, overwrite=True, provenance=provenance) as result:
             attrs = {"statistics": stats} if scene.output.statistics else None
-            result.write_coordinates(grid, scene.units.length)
+            result.write_coordinates(grid, _units(scene)["length"])
             if "topography" in scene.output.fields:
                 result.write_field("topography", grid, topography, attrs=attrs,
                                    units=_units(scene))
@@ -268,8 +271,14 @@ def scene_difference(attrs, scene):
 
 
 def _units(scene):
-    """The scene's units of lengths and pressures, as result files label fields."""
-    return {"length": scene.units.length, "pressure": scene.units.pressure}
+    """The scene's units of lengths and pressures, as result files label fields: a length
+    unit petgap converts in its one spelling ("um" for micron, um and \u00b5m), any other
+    as the scene gives it."""
+    try:
+        length = length_unit(scene.units.length)
+    except ValueError:
+        length = scene.units.length
+    return {"length": length, "pressure": scene.units.pressure}
 
 
 def _run_steps(model, output, log, resume):
@@ -301,19 +310,34 @@ def _run_steps(model, output, log, resume):
         log.info("step %d (%s, %d of %d): %s = %.6g", step.index, step.chain, step.index + 1,
                  len(model.steps), control.kind, control.value)
         return {"monitor": _progress(log, step.index, len(model.steps),
-                                     scene.solver.tolerance)}
+                                     scene.solver.tolerance, finished=wall_times)}
 
-    summaries = []
+    wall_times = []
+
+    summaries, patches_told = [], False
     for step, state in zip(model.steps, model.sweep(done, before=before)):
         if step.index in done:
             summaries.append(state.summary)
             log.info("step %d (%s): complete in the file, not recomputed", step.index, step.chain)
             continue
         _log_solution(log, step, state)
+        wall_times.append(state.wall_time)
         summary = _write_step(model, output, step, state)
         state.summary = summary
         summaries.append(summary)
+        if not patches_told:   # once a run: the first step with small patches speaks for all
+            patches_told = bool(_check_patches(model, step, state, log))
     return summaries
+
+
+def _check_patches(model, step, state, log):
+    """Warn (or refuse, after the step is written) if the step's contact patches are a few
+    pixels across (:func:`petgap.mechanics.plausibility.patch_findings`); the findings."""
+    grid = model.grid
+    stats = contact_statistics_of(model.problem_of(step), state)
+    return plausibility.report(
+        plausibility.patch_findings(stats.mean_diameter, max(grid.dx, grid.dy)),
+        model.scene.checks.plausibility, f"step {step.index}", log, grid.comm)
 
 
 def _write_step(model, output, step, solution):
@@ -337,7 +361,7 @@ def _write_step(model, output, step, solution):
     with _hold_sigterm(), ResultFile.open_for_append(output, comm) as result:
         group = result.begin_step(step.index, attrs=attrs)
         units = _units(scene)
-        result.write_coordinates(grid, scene.units.length, group=group)
+        result.write_coordinates(grid, _units(scene)["length"], group=group)
         if "gap" in fields:
             result.write_field("gap", grid, solution.gap, group=group, units=units)
         if "pressure" in fields:
@@ -408,29 +432,53 @@ class _hold_sigterm:
         return False
 
 
-def _progress(log, index, nsteps, tolerance, every=5.0):
+def _progress(log, index, nsteps, tolerance, every=5.0, finished=()):
     """A solver monitor that logs (rank 0) at most every ``every`` seconds: the step of
-    the sweep, the iteration, the KKT residual against its target, the time so far and,
-    from the residual's decay (:class:`petgap.solvers.convergence.ResidualTrend`), an
-    estimate of the time left."""
-    last = [time.perf_counter()]
-    start = last[0]
-    trend = ResidualTrend(tolerance)
+    the sweep, the iteration, the KKT residual against its target, the time so far and
+    estimates of the time left, in the step (from the residual's decay,
+    :class:`petgap.solvers.convergence.ResidualTrend`) and in the sweep (the steps after
+    this one at the mean time of ``finished``, the wall times of the steps solved before
+    it, or at this step's own).
+
+    The iterations count on through the levels of a coarse start (a level's solver
+    counts from 0 again), so that a line never shows fewer than the one before; the
+    residual's trend starts afresh with each level, whose residuals are another grid's."""
+    start = time.perf_counter()
+    state = {"last": start, "previous": -1, "offset": 0, "trend": ResidualTrend(tolerance)}
 
     def monitor(iteration, residual):
         now = time.perf_counter()
-        trend.add(now - start, residual)
-        if now - last[0] >= every:
-            last[0] = now
-            left = trend.remaining()
-            log.info("  step %d of %d: iteration %d, KKT residual %.3e (target %.0e), %.1f s%s",
-                     index + 1, nsteps, iteration, residual, tolerance, now - start,
-                     "" if left is None else f", about {_duration(left)} to go")
+        if iteration < state["previous"]:      # the next level of the start, or the fine grid
+            state["offset"] += state["previous"] + 1
+            state["trend"] = ResidualTrend(tolerance)
+        state["previous"] = iteration
+        state["trend"].add(now - start, residual)
+        if now - state["last"] < every:
+            return
+        state["last"] = now
+        left = state["trend"].remaining()
+        log.info("  step %d of %d: iteration %d, KKT residual %.3e (target %.0e), %.1f s%s",
+                 index + 1, nsteps, iteration + state["offset"], residual, tolerance,
+                 now - start, _time_left(left, now - start, nsteps - index - 1, finished))
     return monitor
 
 
+def _time_left(left, elapsed, after, finished):
+    """The progress line's estimate of the time left: in the step, and in the sweep."""
+    if left is None:
+        return ""
+    text = f", about {_duration(left)} to go"
+    if after:
+        per_step = sum(finished) / len(finished) if finished else elapsed + left
+        text += f" in this step, {_duration(left + after * per_step)} in the sweep " \
+                f"({after} more step{'s' if after > 1 else ''})"
+    return text
+
+
 def _duration(seconds):
-    """``42 s``, ``3.5 min`` or ``1.2 h``."""
+    """``under 1 s``, ``42 s``, ``3.5 min`` or ``1.2 h``."""
+    if seconds < 1:
+        return "under 1 s"
     if seconds < 90:
         return f"{seconds:.0f} s"
     if seconds < 5400:

@@ -45,6 +45,7 @@ from petgap.parallel.collective import root_decides
 
 __all__ = ["SceneError", "Scene", "GridSection", "SurfaceSection", "MaterialSection",
            "InteractionSection", "ControlSection", "SolverSection", "OutputSection", "UnitsSection",
+           "ChecksSection",
            "schema_default",
            "describe_schema", "to_toml"]
 
@@ -248,6 +249,21 @@ class Str(_Type):
         return value
 
 
+class NameOrIndex(_Type):
+    """A non-empty string or an integer >= 0 (a channel of a file, by name or index)."""
+    name = "string or integer"
+
+    def allowed(self):
+        return "a name (a non-empty string) or an index (an integer >= 0)"
+
+    def convert(self, value, ctx):
+        if isinstance(value, int) and not isinstance(value, bool) and value >= 0:
+            return value
+        if isinstance(value, str) and value:
+            return value
+        raise _Invalid("neither a non-empty string nor an integer >= 0", self.allowed())
+
+
 class FilePath(Str):
     """An existing file; relative paths are relative to the scene file's directory."""
     name = "path"
@@ -446,6 +462,14 @@ def _grid_from_file(what):
     return derive
 
 
+def _file_unit(values, ctx):
+    """The unit a topography file names (in petgap's spelling), or "1"."""
+    header = _file_grid(ctx)
+    if header is None or "error" in header or not header.get("unit"):
+        return "1"
+    return header["unit"]
+
+
 def _default_ny(values, ctx):
     header = _file_grid(ctx)
     if header is not None and "error" not in header and not values.get("_given_nx"):
@@ -575,12 +599,16 @@ class SurfaceSection:
                     "known); relative to the scene file's directory", when=("kind", ["file"]))
     dataset: str = key(Str(), None, "HDF5 dataset to read (default: \"topography\" if present, "
                        "otherwise the only 2D dataset)", when=("kind", ["file"]))
-    channel: str = key(Str(), None, "data channel of an instrument file with several "
-                       "(default: the file's default channel)", when=("kind", ["file"]))
-    detrend: str = key(Choice("none", "center", "height", "slope", "curvature"), "none",
+    channel: str = key(NameOrIndex(), None, "data channel of an instrument file with several, "
+                       "by name or index (`petgap check` lists them; default: the file's "
+                       "default channel)", when=("kind", ["file"]))
+    detrend: str = key(Choice("none", "center", "height", "slope", "curvature", "lines"),
+                       "none",
                        "trend removed from the map (SurfaceTopography's modes): its mean "
                        "(center), the least-squares plane (height), the plane of the mean "
-                       "slope (slope) or the least-squares quadratic surface (curvature)",
+                       "slope (slope) or the least-squares quadratic surface (curvature); "
+                       "or each scan line's own straight line (lines: along x, for AFM maps "
+                       "whose lines show steps)",
                        when=("kind", ["file"]))
     lambda_cutoff: float = key(Length(minimum=0, min_open=True), None,
                                "short-wavelength cutoff of a measured map: wavelengths "
@@ -854,10 +882,25 @@ class UnitsSection:
     attributes.  ``"1"`` (the default, UDUNITS' dimensionless) reads as "in the
     scene's own units": pixels when ``a0 = 1``, ``E*`` when ``contact_modulus = 1``.
     """
-    length: str = key(Str(), "1", "unit of every length, as a UDUNITS string "
-                      "(e.g. \"um\", \"nm\", \"m\"; \"1\": the scene's own unit)")
+    length: str = key(Str(), Derived(_file_unit, "the topography file's unit if it names "
+                                          "one, otherwise \"1\""),
+                      "unit of every length, as a UDUNITS string (e.g. \"um\", \"nm\", \"m\"; "
+                      "\"1\": the scene's own unit); a topography file's heights and size are "
+                      "converted to it from the file's unit (m, mm, um, nm, Angstrom; also "
+                      "spelt micron, \u00b5m, angstrom, \u00c5)")
     pressure: str = key(Str(), "1", "unit of every pressure, as a UDUNITS string "
                         "(e.g. \"MPa\", \"Pa\"; \"1\": the scene's own unit)")
+
+
+@dataclass(frozen=True)
+class ChecksSection:
+    """What a run does with valid but implausible input: an rms slope beyond the
+    small-slope half-space or absurd for the units, a load beyond rough contact, contact
+    patches a few pixels across (:mod:`petgap.mechanics.plausibility`)."""
+    plausibility: str = key(Choice("warn", "error", "off"), "warn",
+                            "implausible input (the number, the limit and what to do): a "
+                            "warning, an error before anything is solved (a patch size: "
+                            "after the step that shows it), or nothing")
 
 
 def _section(cls, doc=None):
@@ -889,6 +932,7 @@ class Scene:
     solver: SolverSection = _section(SolverSection)
     output: OutputSection = _section(OutputSection)
     units: UnitsSection = _section(UnitsSection)
+    checks: ChecksSection = _section(ChecksSection)
     text: str = ""
     path: str = None
     base_dir: str = "."

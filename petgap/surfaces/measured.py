@@ -11,6 +11,16 @@ matrices and x-y-z columns (``.txt``, ``.asc``).  SurfaceTopography reads many m
 (Gwyddion, Digital Instruments/Bruker, Zygo DATX, Sensofar, Keyence, x3p, OPDx, ...)
 through the same call; they are not tested by petgap.
 
+Orientation, one rule for every reader: ``heights[i, j]`` is the point ``(x_i, y_j)``,
+and the first index, x (the axis petgap distributes over the ranks), is the file's rows:
+the first axis of an array (``.npy``, HDF5, MATLAB, netCDF as SurfaceTopography writes it,
+whose variable is ``heights(x, y)``) and the lines of a text matrix, so that one array
+written to any of these files is one map, ``nx`` its number of rows.  x-y-z columns name
+each point's x and y.  Instrument images (Igor, WSxM, Gwyddion, ...) come as
+SurfaceTopography gives them: x along the scan lines, the image's horizontal axis as the
+instrument shows it.  A text matrix's header size (``Width``, along a line) is then
+``Ly``.
+
 A map is read whole on rank 0 (instrument files are small next to a solve:
 a 4096^2 map is 128 MiB), conditioned there with SurfaceTopography's own methods
 (undefined points filled, trend removed, heights in the requested unit) and handed
@@ -46,10 +56,78 @@ from mpi4py import MPI
 #: Trend removal of :func:`read_measured`: SurfaceTopography's ``detrend`` modes
 #: (``center``: the mean; ``height``: the plane of least squares, which minimises the rms
 #: height; ``slope``: the plane of the mean slope, which minimises the rms slope;
-#: ``curvature``: the quadratic surface of least squares).
-DETRENDS = ("none", "center", "height", "slope", "curvature")
+#: ``curvature``: the quadratic surface of least squares), and ``lines``
+#: (:func:`level_lines`), which SurfaceTopography does not have.
+DETRENDS = ("none", "center", "height", "slope", "curvature", "lines")
+
+
+def level_lines(heights):
+    """``heights`` with the straight line of least squares taken off each line along x
+    (``heights[:, j]``), each line's own.
+
+    An AFM scans line by line along x; between lines the tip's height drifts (thermal
+    drift, the feedback, the piezo's creep), so each line carries its own offset and tilt,
+    which a plane fitted to the whole map cannot remove: the map shows stripes along x,
+    and the steps between lines are slopes along y that no surface has.  Levelling each
+    line removes them, and with them any real slope along x longer than a line: use it on
+    maps whose lines show such steps, not on maps of a surface with a known tilt or form.
+    """
+    heights = np.asarray(heights, dtype=np.float64)
+    n = heights.shape[0]
+    x = np.arange(n) - (n - 1) / 2          # centred: offset and slope are independent
+    offset = heights.mean(axis=0)
+    slope = (x @ heights) / (x @ x) if n > 1 else np.zeros(heights.shape[1])
+    return heights - offset[None, :] - x[:, None] * slope[None, :]
 #: What to do with undefined points (NaN or masked) in a map.
 UNDEFINED = ("refuse", "harmonic")
+
+#: The length units petgap converts between, by the spellings it accepts (scenes, files and
+#: SurfaceTopography's readers), each to its canonical name: the one results and figures
+#: print.  ASCII names where there is one ("um", not the micro sign), so that labels and
+#: attributes read the same everywhere.
+LENGTH_UNITS = {
+    "m": "m", "meter": "m", "metre": "m", "meters": "m", "metres": "m",
+    "mm": "mm", "millimeter": "mm", "millimetre": "mm",
+    "um": "um", "\u00b5m": "um", "\u03bcm": "um", "micron": "um", "microns": "um",
+    "micrometer": "um", "micrometre": "um",
+    "nm": "nm", "nanometer": "nm", "nanometre": "nm",
+    "\u00c5": "\u00c5", "\u212b": "\u00c5", "A": "\u00c5", "angstrom": "\u00c5",
+    "Angstrom": "\u00c5", "angstroms": "\u00c5",
+    "pm": "pm", "km": "km",
+}
+#: Metres per canonical unit.
+METRES = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9, "\u00c5": 1e-10, "pm": 1e-12,
+          "km": 1e3}
+
+
+def allowed_length_units():
+    """The units :data:`LENGTH_UNITS` accepts, each with its other spellings, in words."""
+    spellings = {}
+    for name, canonical in LENGTH_UNITS.items():
+        spellings.setdefault(canonical, []).append(name)
+    return ", ".join(c + (f" ({', '.join(n for n in names if n != c)})" if len(names) > 1
+                          else "") for c, names in spellings.items())
+
+
+def length_unit(name, key="units.length"):
+    """The canonical name of a length unit (:data:`LENGTH_UNITS`), or a ValueError naming
+    ``key``, the value and the spellings allowed."""
+    canonical = LENGTH_UNITS.get(str(name).strip())
+    if canonical is None:
+        canonical = LENGTH_UNITS.get(str(name).strip().lower())
+    if canonical is None:
+        raise ValueError(f"{key} = {name!r} is not a length unit petgap converts; allowed: "
+                         f"{allowed_length_units()}, or \"1\" to keep the "
+                         f"file's numbers")
+    return canonical
+
+
+def canonical_file_unit(name):
+    """A file's own unit in canonical spelling; None if the file names none, and the name as
+    the file gives it if it is not a length (a phase or current channel)."""
+    if name is None:
+        return None
+    return LENGTH_UNITS.get(str(name).strip(), str(name))
 
 
 @dataclass
@@ -207,6 +285,28 @@ def readers_for(path):
     return [r for r in readers if r.format() not in UNSIGNED_FORMATS], False
 
 
+#: SurfaceTopography's readers of text matrices: they take a file's lines as y (its x runs
+#: along a line, as across an image).  petgap takes a matrix's lines as x, the first index,
+#: as it takes the first axis of every array it reads (``.npy``, HDF5, MATLAB, netCDF), so
+#: that one array written to any of these files is one map (module docstring).
+LINES_ARE_X = ("asc",)
+
+
+def _transposed(reader):
+    """Whether petgap's map is the transpose of what ``reader`` gives (:data:`LINES_ARE_X`)."""
+    return reader.format() in LINES_ARE_X
+
+
+def _transpose(topography, sizes):
+    """A read topography with its axes exchanged, and its header's physical size."""
+    heights = topography.heights()
+    swapped = surface_topography().Topography(
+        np.ma.masked_array(np.ma.getdata(heights).T, mask=np.ma.getmaskarray(heights).T),
+        tuple(float(v) for v in topography.physical_sizes)[::-1], unit=topography.unit,
+        periodic=topography.is_periodic)
+    return swapped, None if sizes is None else tuple(sizes)[::-1]
+
+
 #: First line of a WSxM file, and the line that ends its header.
 WSXM_SIGNATURE, WSXM_HEADER_END = b"WSxM file copyright", b"[Header end]"
 
@@ -267,16 +367,36 @@ def _open_channel(path, channel):
     file's default), checked (:func:`check_channel`); ValueError naming the file otherwise."""
     check_file(path)
     reader = _open_reader(path)
-    names = [c.name for c in reader.channels]
-    if channel is not None and channel not in names:
-        raise ValueError(f"topography {path} has no channel {channel!r}; channels: "
-                         f"{', '.join(repr(n) for n in names)}")
-    chosen = reader.default_channel if channel is None else reader.channels[names.index(channel)]
+    chosen = reader.default_channel if channel is None else \
+        choose_channel(path, reader.channels, channel)
     if chosen.dim != 2:
         raise ValueError(f"topography {path} (channel {chosen.name!r}) is a line scan with "
                          f"{chosen.nb_grid_pts} points; petgap needs a 2D map")
     check_channel(path, chosen)
     return reader, chosen
+
+
+def choose_channel(path, channels, channel):
+    """The channel ``channel`` names among a file's ``channels``: by its index (an int, or a
+    string of digits that is no channel's name) or by its name, which must then be one
+    channel's only; a ValueError naming ``surface.channel`` and listing the channels with
+    their indices otherwise."""
+    names = [str(c.name) for c in channels]
+    listing = ", ".join(f"{i}: {n!r}" for i, n in enumerate(names))
+    if isinstance(channel, str) and channel in names:
+        found = [i for i, n in enumerate(names) if n == channel]
+        if len(found) > 1:
+            raise ValueError(f"surface.channel = {channel!r}: topography {path} has "
+                             f"{len(found)} channels of that name (indices "
+                             f"{', '.join(map(str, found))}); allowed: a channel's index, "
+                             f"channels: {listing}")
+        return channels[found[0]]
+    index = channel if isinstance(channel, int) and not isinstance(channel, bool) else \
+        int(channel) if isinstance(channel, str) and channel.isdigit() else None
+    if index is None or not 0 <= index < len(channels):
+        raise ValueError(f"surface.channel = {channel!r}: topography {path} has no channel "
+                         f"{channel!r}; allowed: a name or an index of its channels: {listing}")
+    return channels[index]
 
 
 def check_channel(path, channel):
@@ -305,8 +425,9 @@ def read_measured(path, *, channel=None, unit=None, detrend="none", undefined="r
     Parameters
     ----------
     path : str or os.PathLike
-    channel : str, optional
-        The data channel (by name) of a file with several; default: the file's default.
+    channel : str or int, optional
+        The data channel of a file with several, by name or index
+        (:func:`choose_channel`); default: the file's default.
     unit : str, optional
         Length unit wanted (``"um"``, ``"nm"``, ...; a scene's ``units.length``): heights
         and sizes are converted from the file's unit.  ``None`` keeps the file's.
@@ -341,6 +462,8 @@ def read_measured(path, *, channel=None, unit=None, detrend="none", undefined="r
             raise ValueError(f"topography file {path}: SurfaceTopography cannot read its "
                              f"heights ({type(exc).__name__}: {_first_line(exc)}); the file "
                              f"is truncated or damaged") from None
+    if _transposed(reader):
+        topography, sizes = _transpose(topography, sizes)
     return _condition(path, topography, type(reader).__name__, str(chosen.name), unit,
                       detrend, undefined, sizes)
 
@@ -358,36 +481,44 @@ def _condition(path, topography, reader, channel, unit, detrend, undefined, size
                          f"before")
     if missing:
         topography = topography.interpolate_undefined_data("harmonic")
-    file_unit = topography.unit
-    if unit is not None and file_unit is not None and unit != file_unit:
-        conversion_factor(path, file_unit, unit)
-        topography = topography.to_unit(unit)
-    if detrend != "none":
+    unit_of_file = canonical_file_unit(topography.unit)
+    factor = 1.0 if unit is None or unit_of_file is None else \
+        conversion_factor(path, unit_of_file, unit)
+    if detrend not in ("none", "lines"):
         topography = topography.detrend(detrend_mode=detrend)
     heights = np.ma.getdata(topography.heights()).astype(np.float64, copy=True)
+    if detrend == "lines":
+        heights = level_lines(heights)
+    if factor != 1.0:
+        heights *= factor
     return Measurement(heights=heights,
                        physical_size=None if sizes is None else
-                       tuple(float(s) for s in topography.physical_sizes),
-                       unit=topography.unit, periodic=bool(topography.is_periodic),
-                       reader=reader, channel=channel, undefined=missing)
+                       tuple(factor * float(s) for s in topography.physical_sizes),
+                       unit=unit_of_file if unit is None or unit_of_file is None else
+                       length_unit(unit),
+                       periodic=bool(topography.is_periodic), reader=reader, channel=channel,
+                       undefined=missing)
 
 
-def conversion_factor(path, file_unit, unit):
+def conversion_factor(path, unit_of_file, unit):
     """The factor from the file's length unit to ``unit`` (the scene's ``units.length``);
-    a ValueError naming the file, both units and which one is the problem otherwise."""
-    # deferred: with the package
-    from SurfaceTopography.Support.UnitConversion import get_unit_conversion_factor, length_units
+    a ValueError naming the key, the value and what is allowed otherwise: ``units.length``
+    for a unit petgap does not know, ``surface.channel`` for a channel whose unit is not a
+    length."""
     try:
-        return get_unit_conversion_factor(file_unit, unit)
-    except Exception as exc:
-        known = ", ".join(u for u in length_units if u != "µm")
-        culprit = (f"units.length = {unit!r} is not a length unit SurfaceTopography knows"
-                   if unit not in length_units and file_unit in length_units else
-                   f"the file's unit {file_unit!r} is not a length (a height channel? "
-                   f"surface.channel chooses another)")
-        raise ValueError(f"topography {path}: cannot convert its unit {file_unit!r} to {unit!r} "
-                         f"(units.length): {culprit} ({_first_line(exc)}); allowed: "
-                         f"{known}, or units.length = \"1\" to keep the file's numbers") from None
+        wanted = length_unit(unit)
+    except ValueError:
+        raise ValueError(f"units.length = {unit!r}: topography {path}: cannot convert its unit "
+                         f"{unit_of_file!r} to {unit!r}, which is not a length unit petgap "
+                         f"converts; allowed: {allowed_length_units()}, or "
+                         f"\"1\" to keep the file's numbers") from None
+    if canonical_file_unit(unit_of_file) not in METRES:
+        raise ValueError(f"surface.channel: topography {path}: the channel's unit "
+                         f"{unit_of_file!r} is not a length, so its heights cannot be converted "
+                         f"to units.length = {unit!r} (a phase or current channel? "
+                         f"surface.channel chooses another; units.length = \"1\" keeps the "
+                         f"numbers as they are)")
+    return METRES[canonical_file_unit(unit_of_file)] / METRES[wanted]
 
 
 def read_header(path, channel=None, unit=None):
@@ -398,14 +529,17 @@ def read_header(path, channel=None, unit=None):
     ``periodic`` is the file's own say (instrument maps are not, as a rule).  Raises what
     :func:`read_measured` raises about the file's header.
     """
-    _, chosen = _open_channel(path, channel)
-    size, file_unit = chosen.physical_sizes, chosen.unit
-    if size is not None and unit is not None and file_unit is not None and unit != file_unit:
-        factor = conversion_factor(path, file_unit, unit)
-        size, file_unit = tuple(factor * float(v) for v in size), unit
-    return {"shape": tuple(int(n) for n in chosen.nb_grid_pts),
-            "size": None if size is None else tuple(float(v) for v in size), "unit": file_unit,
-            "periodic": bool(getattr(chosen, "is_periodic", False))}
+    reader, chosen = _open_channel(path, channel)
+    size, unit_of_file = chosen.physical_sizes, canonical_file_unit(chosen.unit)
+    shape = tuple(int(n) for n in chosen.nb_grid_pts)
+    if _transposed(reader):
+        shape, size = shape[::-1], None if size is None else tuple(size)[::-1]
+    if unit is not None and unit_of_file is not None:
+        factor = conversion_factor(path, unit_of_file, unit)
+        size = None if size is None else tuple(factor * float(v) for v in size)
+        unit_of_file = length_unit(unit)
+    return {"shape": shape, "size": None if size is None else tuple(float(v) for v in size),
+            "unit": unit_of_file, "periodic": bool(getattr(chosen, "is_periodic", False))}
 
 
 def scatter_rows(grid, heights):

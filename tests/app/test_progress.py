@@ -31,3 +31,29 @@ def test_durations_read_at_a_glance():
     assert _duration(42) == "42 s"
     assert _duration(210) == "3.5 min"
     assert _duration(4 * 3600) == "4.0 h"
+
+
+def test_iterations_count_on_through_the_levels_and_the_sweep_has_its_eta(monkeypatch):
+    clock = [0.0]
+    monkeypatch.setattr("petgap.app.run.time.perf_counter", lambda: clock[0])
+    log = Capture()
+    # step 2 of 4; the steps before took 30 s each
+    monitor = _progress(log, index=1, nsteps=4, tolerance=1e-8, every=5.0, finished=[30.0, 30.0])
+    levels = [(range(10), 1e-1), (range(25), 1e-2)]        # a coarse level, then the fine grid
+    shown = []
+    for its, first in levels:
+        for k in its:
+            clock[0] += 1.0
+            monitor(k, first * math.exp(-math.log(10) * k / 5))   # a decade every 5 s
+            shown.append(k)
+    numbers = [int(line.split("iteration ")[1].split(",")[0]) for line in log.lines]
+    assert numbers == sorted(numbers) and numbers[-1] == 34       # 10 + 24, never restarted
+    last = log.lines[-1]
+    # fine level: 1e-2 -> 1e-8 is six decades, 30 s; at iteration 24 (24 s) about 6 s remain;
+    # the two steps after it take 30 s each: about 66 s in the sweep
+    assert "about 6 s to go in this step, 66 s in the sweep (2 more steps)" in last
+    assert "about 0 s" not in "".join(log.lines)
+
+
+def test_a_step_ending_now_says_so():
+    assert _duration(0.2) == "under 1 s"

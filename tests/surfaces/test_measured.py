@@ -9,10 +9,13 @@ import pytest
 from petgap.app.build import build
 from petgap.io.scene import Scene
 from petgap.parallel.grid import Grid
-from petgap.surfaces.measured import read_measured, surface_topography
+from types import SimpleNamespace
+
+from petgap.surfaces.measured import (choose_channel, length_unit, level_lines, read_header,
+                                      read_measured, surface_topography)
 from petgap.surfaces.topography import read_map
 from petgap.surfaces.self_affine import self_affine
-from petgap.surfaces.topography import load_topography, save_topography_npy
+from petgap.surfaces.topography import load_topography, map_header, save_topography_npy
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "topographies"
 
@@ -21,7 +24,8 @@ FORMATS = {
     "10x10-one_channel_without_name.ibw": ("IBWReader", (10, 10), (10.0, 10.0), None),
     "nc-1.nc": ("NCReader", (5, 10), (5.0, 10.0), "nm"),
     "top-1.top": ("WSXMReader", (256, 256), (600.0, 600.0), "nm"),
-    "txt_example.txt": ("AscReader", (6, 3), (1e-6, 5e-7), "m"),
+    # a text matrix's lines are x: 3 lines of 6, its header's Width (1e-6, along a line) is Ly
+    "txt_example.txt": ("AscReader", (3, 6), (5e-7, 1e-6), "m"),
     "matrix-5.txt": ("AscReader", (10, 10), None, None),
     "xyz-1.txt": ("XYZReader", (4, 4), (4.0, 4.0), None),
 }
@@ -42,7 +46,8 @@ def test_formats_read_as_surface_topography_reads_them(name):
     m = read_measured(DATA / name)
     assert m.reader == reader and m.heights.shape == shape and m.unit == unit
     assert m.physical_size == (None if size is None else pytest.approx(size, rel=1e-12))
-    np.testing.assert_array_equal(m.heights, np.ma.getdata(direct(DATA / name).heights()))
+    expected = np.ma.getdata(direct(DATA / name).heights())
+    np.testing.assert_array_equal(m.heights, expected.T if reader == "AscReader" else expected)
     assert np.all(np.isfinite(m.heights)) and m.undefined == 0
 
 
@@ -238,3 +243,76 @@ def test_lambda_cutoff_removes_the_short_wavelengths_only(comm, mpi_tmp_path):
     model = build(load_scene(mpi_tmp_path / "waves.toml", comm), comm)
     whole = np.concatenate(comm.allgather(model.topography))
     np.testing.assert_allclose(whole, long_wave, atol=1e-13)
+
+
+@pytest.mark.parametrize("spelling, factor", [
+    ("micron", 1e-3), ("um", 1e-3), ("\u00b5m", 1e-3), ("\u03bcm", 1e-3), ("nm", 1.0),
+    ("angstrom", 10.0), ("\u00c5", 10.0), ("mm", 1e-6), ("m", 1e-9)])
+def test_unit_spellings_convert_alike(spelling, factor):
+    nm = read_measured(DATA / "top-1.top")
+    m = read_measured(DATA / "top-1.top", unit=spelling)
+    np.testing.assert_allclose(m.heights, factor * nm.heights, rtol=1e-12)
+    assert m.physical_size == pytest.approx((600 * factor, 600 * factor), rel=1e-12)
+    assert m.unit == length_unit(spelling) and m.unit in ("um", "nm", "\u00c5", "mm", "m")
+
+
+def test_an_unknown_unit_is_blamed_on_units_length_with_what_is_allowed():
+    with pytest.raises(ValueError, match=r"^units.length = 'furlong'.*allowed: m .*um \(.*micron"):
+        read_measured(DATA / "top-1.top", unit="furlong")
+    with pytest.raises(ValueError, match=r"^units.length = 'furlong'"):
+        read_header(DATA / "top-1.top", unit="furlong")
+
+
+def test_channels_by_index_and_shared_names_are_listed_with_indices():
+    channels = [SimpleNamespace(name=n) for n in ("ZSensor", "Height", "Height")]
+    assert choose_channel("f.ibw", channels, 0) is channels[0]
+    assert choose_channel("f.ibw", channels, "2") is channels[2]
+    assert choose_channel("f.ibw", channels, "ZSensor") is channels[0]
+    with pytest.raises(ValueError, match=r"^surface.channel = 'Height': .* 2 channels of that "
+                                         r"name \(indices 1, 2\).*0: 'ZSensor', 1: 'Height', "
+                                         r"2: 'Height'"):
+        choose_channel("f.ibw", channels, "Height")
+    with pytest.raises(ValueError, match=r"^surface.channel = 'Hieght': .*no channel 'Hieght'"
+                                         r"; allowed: .*0: 'ZSensor'"):
+        choose_channel("f.ibw", channels, "Hieght")
+    with pytest.raises(ValueError, match=r"^surface.channel = 3: "):
+        choose_channel("f.ibw", channels, 3)
+    m = read_measured(DATA / "nc-1.nc", channel=0)
+    assert m.heights.shape == (5, 10)
+
+
+def test_one_array_is_one_map_in_every_format(tmp_path):
+    """x is the file's rows: a 5 x 7 array written as .npy, HDF5, text matrix, MATLAB,
+    netCDF (SurfaceTopography's writer) and x-y-z columns reads back as the same 5 x 7 map."""
+    import h5py
+    import scipy.io
+    heights = np.random.default_rng(4).standard_normal((5, 7))
+    np.save(tmp_path / "map.npy", heights)
+    with h5py.File(tmp_path / "map.h5", "w") as f:
+        f["topography"] = heights
+    np.savetxt(tmp_path / "map.txt", heights)
+    scipy.io.savemat(tmp_path / "map.mat", {"heights": heights})
+    surface_topography().Topography(heights, (5.0, 7.0), unit="um").to_netcdf(tmp_path / "map.nc")
+    x, y = np.meshgrid(np.arange(5.0), np.arange(7.0), indexing="ij")
+    np.savetxt(tmp_path / "map.xyz", np.column_stack([x.ravel(), y.ravel(), heights.ravel()]))
+    for name in ("map.npy", "map.h5", "map.txt", "map.mat", "map.nc", "map.xyz"):
+        m = read_map(tmp_path / name)
+        assert m.heights.shape == (5, 7), name
+        np.testing.assert_allclose(m.heights, heights, rtol=1e-12, atol=1e-12, err_msg=name)
+        assert map_header(tmp_path / name)["shape"] == (5, 7), name
+
+
+def test_level_lines_takes_each_lines_own_line_off(tmp_path):
+    rng = np.random.default_rng(5)
+    x = np.arange(40.0)[:, None]
+    offsets, tilts = rng.normal(size=(1, 30)), rng.normal(size=(1, 30)) * 1e-2
+    bumps = 1e-3 * np.sin(2 * np.pi * x / 40 * 3) * np.ones((1, 30))   # no line in it
+    scanned = bumps + offsets + tilts * x
+    levelled = level_lines(scanned)
+    slope, offset = np.polyfit(x.ravel(), bumps, 1)           # the bumps' own line
+    np.testing.assert_allclose(levelled, bumps - offset - slope * x, atol=1e-12)
+    # a plane cannot remove the steps between lines; "lines" through the reader does
+    np.save(tmp_path / "scan.npy", scanned)
+    assert np.std(read_map(tmp_path / "scan.npy", detrend="height").heights) > 0.1
+    np.testing.assert_allclose(read_map(tmp_path / "scan.npy", detrend="lines").heights,
+                               levelled, atol=1e-12)
