@@ -86,13 +86,15 @@ def coarsening_factor(shape):
     return None
 
 
-def coarse_problem(problem, precision=None):
+def coarse_problem(problem, precision=None, scales=None):
     """The block-averaged problem on the coarse grid, or None if the shape has none.
 
     Collective.  Made anew on every call (the caller drops it after the start);
     about ``1/f^2`` of the fine problem's memory.  ``precision``: the coarse
     grid's; by default single on a periodic cell (the pressure solver's start, see
     the module docstring; the free half-space is double only), else the grid's.
+    ``scales``: the coarse problem's KKT scales
+    (:class:`~petgap.mechanics.problem.Scales`); by default its own topography's.
     """
     grid = problem.grid
     f = coarsening_factor(grid.shape)
@@ -115,7 +117,7 @@ def coarse_problem(problem, precision=None):
                               cgrid.planner)
     h = restrict(grid, cgrid, problem.topography, f).astype(cgrid.dtype, copy=False)
     return ContactProblem(cgrid, h, problem.half_space.on_grid(cgrid),
-                          problem.interaction)
+                          problem.interaction, scales=scales)
 
 
 def is_whole(grid, coarse):

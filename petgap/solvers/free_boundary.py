@@ -80,6 +80,21 @@ def _to_map(grid, cell, field):
     return out
 
 
+def _step_tolerance(tolerance, error, forcing=0.1, loosest=1e-4):
+    """KKT tolerance of the next cell solve of the mean-gap secant (unit-free).
+
+    Why: a solve's residual moves the map's mean gap by about that residual
+    times ``h0`` (the problem's gap scale), so a step that still has a mean-gap
+    error ``error h0`` to remove needs its solve only to a fraction ``forcing``
+    of it (an inexact secant, as inexact Newton methods choose their forcing
+    terms), and never tighter than ``tolerance``, which the last solve meets.
+    The first solve, whose error is not known yet, goes to ``loosest``.
+    """
+    if error is None:
+        return max(tolerance, loosest)
+    return max(tolerance, min(loosest, forcing * error))
+
+
 class PaddedCell:
     """The free-boundary solver of the solvers on the gap: the map solved on its padded cell.
 
@@ -136,8 +151,10 @@ class PaddedCell:
 
         The cell's mean gap less the map's is the outside points' share, estimated
         first as if ``u`` were the same outside as inside (the secant steps correct it).
-        Returns the last cell solution, the solves, iterations and history summed, and
-        the verdict.
+        The steps are inexact: a solve is taken only as far as the step it serves
+        needs (:func:`_step_tolerance`), and the answer is a solve to the whole
+        tolerance whose map mean gap meets the target.  Returns the last cell
+        solution, the solves, iterations and history summed, and the verdict.
         """
         grid, cell = problem.grid, on_cell.grid
         fraction = grid.npoints / cell.npoints
@@ -147,8 +164,10 @@ class PaddedCell:
         guess = target + (1 - fraction) * (problem.mean_height - h_out)
         previous, solves, iterations, history = None, 0, 0, []
         converged, reason = False, "max_solves"
+        inner = _step_tolerance(settings.tolerance, None)
         while solves < self.max_solves:
-            solution = solve_as(on_cell, MeanGap(guess), kind, settings, warm, monitor)
+            solution = solve_as(on_cell, MeanGap(guess), kind, settings.but(tolerance=inner),
+                                warm, monitor)
             solves += 1
             iterations += solution.iterations
             history.extend(solution.history)
@@ -157,9 +176,11 @@ class PaddedCell:
             if not solution.converged:
                 reason = solution.reason
                 break
-            if abs(mean - target) <= settings.tolerance * problem.gap_scale:
+            error = abs(mean - target) / problem.gap_scale
+            if error <= settings.tolerance and inner <= settings.tolerance:
                 converged, reason = True, solution.reason
                 break
+            inner = _step_tolerance(settings.tolerance, error)
             slope = 1.0
             if previous is not None and guess != previous[0]:
                 slope = (mean - previous[1]) / (guess - previous[0])

@@ -20,7 +20,10 @@ A cold gap solve (:func:`petgap.solvers.gap_cg.gap_cg`) starts from one of:
 * otherwise the solver's own start: the rigid approach.
 
 Conventions: the coarse problem is :func:`petgap.solvers.coarse.coarse_problem`
-in the fine grid's precision (the gap solver works in double); what is
+in the fine grid's precision (the gap solver works in double) and with the fine
+problem's KKT scales, so that its tolerance means what the fine one's does (a
+free map's padded cell has the map's scales, not those of its far surface,
+:mod:`petgap.solvers.free_boundary`); what is
 prolonged is the smooth part of the state, ``g + h`` (the surface's deformed
 position, whose stiffness gives ``p_el``), repeated over each block, and the
 fine gap is that less the fine topography, so that the fine roughness inside
@@ -66,7 +69,7 @@ def coarse_start_gap(problem, control, settings, solver):
     if not settings.coarse_start or not problem.half_space.periodic or f is None \
             or min(grid.shape) // f < MIN_SIDE:
         return None, ""
-    level = coarse.coarse_problem(problem, precision=grid.precision)
+    level = coarse.coarse_problem(problem, precision=grid.precision, scales=problem.scales)
     if level is None:
         return None, ""
     solution = solver(level, control, settings.but(

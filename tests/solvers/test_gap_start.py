@@ -86,7 +86,7 @@ def test_the_start_is_the_coarse_deformed_surface_over_the_fine_roughness(comm):
 
     gap, description = coarse_start_gap(problem, target, SolverSettings(tolerance=TOL), level)
     start = gap + problem.topography
-    coarse_level = coarse.coarse_problem(problem, precision="double")
+    coarse_level = coarse.coarse_problem(problem, precision="double", scales=problem.scales)
     smooth = levels[0].gap + coarse_level.topography
     whole = coarse.is_whole(grid, coarse_level.grid)
     expected = coarse.prolong(coarse_level.grid.x_slice.start, grid, smooth, 2, whole)
