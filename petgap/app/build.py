@@ -32,7 +32,7 @@ from petgap.io.scene import Scene, SceneError
 from petgap.mechanics.free_half_space import FreeHalfSpace
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics import plausibility
-from petgap.mechanics.interactions import check_resolution, from_scene
+from petgap.mechanics.interactions import HardWall, check_resolution, from_scene
 from petgap.mechanics.problem import ContactProblem
 from petgap.parallel.grid import Grid, check_decomposition
 from petgap.parallel.log import get_logger, timed
@@ -367,9 +367,16 @@ def preflight(scene, comm, *, petsc_args=(), strict=False, resolution_check=None
     law = from_scene(interaction)
     if steps and law.adhesive and mode == "error":
         g = scene.grid
-        check_resolution(law, min(g.size[0] / g.nx, g.size[1] / g.ny),  # as the Grid does
+        check_resolution(stickiest(interaction),
+                         min(g.size[0] / g.nx, g.size[1] / g.ny),  # as the Grid does
                          scene.material.contact_modulus, "error")
     return steps, need
+
+
+def stickiest(interaction):
+    """The law of a scene's ``[interaction]`` at its largest work of adhesion: the one whose
+    process zone is the smallest, which the grid must resolve for every step to."""
+    return from_scene(interaction, work=max(interaction.work_of_adhesion))
 
 
 def statistics_of(grid, topography):
@@ -418,6 +425,7 @@ class Model:
     half_space: object = None
     problem: object = None
     adhesive_problem: object = None
+    series: dict = field(default_factory=dict)
     interaction: object = None
     resolution: dict = None
     steps: list = field(default_factory=list)
@@ -436,9 +444,24 @@ class Model:
         return dict(solver=s.tao_type, tolerance=s.tolerance, max_iterations=s.max_iterations,
                     options=self.options, precision=s.precision)
 
+    def law_of(self, step):
+        """The interaction law a planned step solves with (the hard wall, the scene's law, or
+        its law at the step's own work of adhesion in a series)."""
+        if not step.adhesive:
+            return HardWall()
+        if step.work is None:
+            return self.interaction
+        return from_scene(self.scene.interaction, work=step.work)
+
     def problem_of(self, step):
         """The problem a planned step solves."""
-        return self.adhesive_problem if step.adhesive else self.problem
+        if not step.adhesive:
+            return self.problem
+        if step.work is None:
+            return self.adhesive_problem
+        if step.work not in self.series:   # the surface and half-space shared
+            self.series[step.work] = self.adhesive_problem.with_interaction(self.law_of(step))
+        return self.series[step.work]
 
     def sweep_steps(self, states=None):
         """The planned steps as :class:`~petgap.solvers.sweeps.SweepStep` s.
@@ -536,7 +559,8 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
     law = from_scene(interaction)
     if law.adhesive:
         mode = interaction.resolution_check if resolution_check is None else resolution_check
-        model.resolution = check_resolution(law, min(grid.dx, grid.dy), modulus, mode)
+        model.resolution = check_resolution(stickiest(interaction), min(grid.dx, grid.dy),
+                                            modulus, mode)
         model.interaction = law
         model.adhesive_problem = ContactProblem(grid, topography, model.half_space, law)
     return model

@@ -10,7 +10,11 @@ its chain.
   Fig. 3): one chain of non-adhesive steps at the given loads, then one chain
   of adhesive steps, each at the mean gap that the matching non-adhesive step
   found.  Both chains are stored, so the adhesive gap distributions can be
-  normalised by the non-adhesive ``g0`` and ``c``, as in Fig. 3.
+  normalised by the non-adhesive ``g0`` and ``c``, as in Fig. 3.  A list of
+  works of adhesion repeats the adhesive steps once per ``w``, in the order
+  given, in the same chain: from non-sticky to sticky, each ``w`` starts from
+  the state of the one before at the same mean gap (continuation), and the
+  reference is solved once.
 """
 from dataclasses import dataclass
 from typing import Optional
@@ -35,6 +39,9 @@ class Step:
         ``None`` when the value comes from ``reference_step``'s mean gap.
     reference_step : int or None
         Index of the step whose mean gap this step imposes.
+    work : float or None
+        The work of adhesion of this step, where the scene lists several (else None:
+        the scene's one).
     """
 
     index: int
@@ -42,6 +49,7 @@ class Step:
     adhesive: bool
     control: Optional[object]
     reference_step: Optional[int] = None
+    work: Optional[float] = None
 
     def attrs(self):
         """Attributes describing the plan of this step (for its HDF5 group)."""
@@ -59,8 +67,12 @@ def plan(scene):
     values = list(control.values)
     if control.reference == "non-adhesive":
         steps = [Step(i, "reference", False, Load(v)) for i, v in enumerate(values)]
-        k = len(values)
-        steps += [Step(k + i, "adhesive", True, None, reference_step=i) for i in range(k)]
+        works = scene.interaction.work_of_adhesion
+        series = list(works) if len(works) > 1 else [None]
+        for work in series:
+            first = len(steps)
+            steps += [Step(first + i, "adhesive", True, None, reference_step=i, work=work)
+                      for i in range(len(values))]
         return steps
     return [Step(i, "sweep", adhesive, make(v)) for i, v in enumerate(values)]
 

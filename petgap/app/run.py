@@ -345,7 +345,7 @@ def _write_step(model, output, step, solution):
     scene, grid, comm = model.scene, model.grid, model.grid.comm
     stats, fields = model.statistics, scene.output.fields
     scalars = solution.scalars()
-    law = model.interaction if step.adhesive else HardWall()
+    law = model.law_of(step)
     attrs = {"plan": step.attrs(), "solution": scalars,
              # the law applied to this step, as petgap-post rebuilds it
              "interaction": law.attributes(),

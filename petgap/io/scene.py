@@ -701,9 +701,13 @@ class InteractionSection:
     kind: str = key(Choice("hard-wall", *ADHESIVE_LAWS), "hard-wall",
                     "hard-wall: g >= 0 only; the others add an attraction v(g): " +
                     "; ".join(f"{name}: {law}" for name, law in ADHESIVE_LAWS.items()))
-    work_of_adhesion: float = key(Float(minimum=0, min_open=True), REQUIRED,
+    work_of_adhesion: tuple = key(Numbers(Float(minimum=0, min_open=True)), REQUIRED,
                                   "w, energy per area (pressure x length): -v(0), the energy "
-                                  "per area it takes to separate the surfaces from contact",
+                                  "per area it takes to separate the surfaces from contact; "
+                                  "a list of values (with control.reference = "
+                                  "\"non-adhesive\") solves the adhesive steps once per w, "
+                                  "in order, against one non-adhesive reference (paper "
+                                  "Fig. 3)",
                                   when=("kind", list(ADHESIVE_LAWS)))
     range: float = key(Length(minimum=0, min_open=True), REQUIRED,
                        "the length scale of the attraction (rho, delta or z0; see kind)",
@@ -771,6 +775,13 @@ class ControlSection:
             problems.append(("values", list(vals), f"item {vals.index(0)} (0) is a zero load "
                              f"with a hard-wall interaction, where the surfaces only touch",
                              "loads > 0 with the hard wall (a step that carries something)"))
+        works = getattr(interaction, "work_of_adhesion", None)
+        if values.get("reference") is None and isinstance(works, tuple) and len(works) > 1:
+            problems.append(("reference", None,
+                             f"interaction.work_of_adhesion is a list of {len(works)} values, "
+                             f"a series that needs one non-adhesive reference",
+                             "reference = \"non-adhesive\" with a list of works of adhesion, "
+                             "or one work_of_adhesion"))
         if values.get("reference") is not None and interaction is not None \
                 and interaction.kind == "hard-wall":
             problems.append(("reference", values["reference"],

@@ -12,7 +12,7 @@ from mpi4py import MPI
 from petgap.app import protocol
 from petgap.app.build import Model, build, load_scene, petsc_options_dict
 from petgap.io.scene import Scene, SceneError
-from petgap.mechanics.interactions import LAWS, ExponentialAdhesion, HardWall
+from petgap.mechanics.interactions import LAWS, ExponentialAdhesion, HardWall, check_resolution
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.solvers.sweeps import SweepStep
 
@@ -246,3 +246,65 @@ def test_single_precision_run_stores_its_fields_in_32_bits(comm, mpi_tmp_path):
         h = read_field(f, "topography", model.grid)
     assert dtypes == [np.float32] * 3 and precision == "single"
     assert h.dtype == np.float64 and np.array_equal(h, model.topography.astype(np.float64))
+
+
+# ------------------------------------------------------ a series of works of adhesion
+SERIES = dict(PROTOCOL, interaction=dict(PROTOCOL["interaction"],
+                                         work_of_adhesion=[1e-4, 2e-4, 4e-4]))
+
+
+def test_a_series_of_works_solves_one_reference_and_each_w_in_turn(comm):
+    """``work_of_adhesion = [w1, w2, w3]`` (paper Fig. 3): the references once, then the
+    adhesive steps once per w, in order, each w a problem of its own on the shared
+    surface and half-space; the strictest w is the one the resolution check judges."""
+    scene = Scene.from_dict(SERIES, comm)
+    model = build(scene, comm)
+    plan = [(s.index, s.chain, s.reference_step, s.work) for s in model.steps]
+    problems = [model.problem_of(s) for s in model.steps]
+    laws = [model.law_of(s) for s in model.steps]
+    assert plan == [(0, "reference", None, None), (1, "reference", None, None),
+                    (2, "adhesive", 0, 1e-4), (3, "adhesive", 1, 1e-4),
+                    (4, "adhesive", 0, 2e-4), (5, "adhesive", 1, 2e-4),
+                    (6, "adhesive", 0, 4e-4), (7, "adhesive", 1, 4e-4)]
+    assert [law.work for law in laws[2:]] == [1e-4, 1e-4, 2e-4, 2e-4, 4e-4, 4e-4]
+    assert isinstance(laws[0], HardWall) and problems[0] is model.problem
+    assert [p.interaction.work for p in problems[2:]] == [1e-4, 1e-4, 2e-4, 2e-4, 4e-4, 4e-4]
+    assert problems[2] is problems[3] and problems[4] is problems[5] \
+        and problems[2] is not problems[4]
+    assert all(p.half_space is model.half_space for p in problems)
+    assert all(p.topography is model.topography for p in problems)
+    stickiest = check_resolution(ExponentialAdhesion(4e-4, 1.0), 0.5, 2.0, "off")
+    assert model.resolution["message"] == stickiest["message"]
+    assert model.resolution["message"] != check_resolution(
+        ExponentialAdhesion(1e-4, 1.0), 0.5, 2.0, "off")["message"]
+
+
+def test_a_series_of_works_needs_the_reference(comm):
+    data = dict(SERIES, control={"kind": "load", "values": [0.002]})
+    with pytest.raises(SceneError) as info:
+        Scene.from_dict(data, comm)
+    message = str(info.value)
+    assert "control.reference" in message and "work_of_adhesion is a list of 3" in message
+    assert "non-adhesive" in message
+
+
+def test_a_series_of_works_runs_and_stores_each_w(comm, mpi_tmp_path):
+    """The run stores each adhesive step with its own w (as petgap-post rebuilds the law),
+    at its reference's mean gap; a stickier w pulls harder at the same mean gap."""
+    import h5py  # deferred: reads the result file
+    from petgap.app import run_scene
+    data = dict(SERIES, control={"kind": "load", "values": [0.002],
+                                 "reference": "non-adhesive"})
+    scene = Scene.from_dict(data, comm)
+    out = mpi_tmp_path / "series.h5"
+    run_scene(scene, comm, out)
+    with h5py.File(out, "r", driver="mpio", comm=comm) as f:
+        steps = sorted(k for k in f if k.startswith("step_"))
+        works = [f[k].attrs.get("interaction.work_of_adhesion") for k in steps]
+        gaps = [f[k].attrs["solution.mean_gap"] for k in steps]
+        pressures = [f[k].attrs["solution.mean_pressure"] for k in steps]
+        converged = [bool(f[k].attrs["solution.converged"]) for k in steps]
+    assert len(steps) == 4 and all(converged)
+    assert list(works[1:]) == [1e-4, 2e-4, 4e-4]
+    assert gaps[1:] == pytest.approx([gaps[0]] * 3, rel=1e-7)
+    assert pressures[0] > pressures[1] > pressures[2] > pressures[3]

@@ -16,6 +16,7 @@ the ranks are continued (by ``mpirun`` itself when it is the one signalled): a
 signal delivered to a stopped process acts when it resumes, where it stopped.
 """
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -773,7 +774,8 @@ def text_map(width):
 
 
 #: name: (file written, its bytes or a writer, extra surface keys, fragments of the error);
-#: every error must also lead with the file (after the scene's name).
+#: every error must also lead with the file (after the scene's name, and the key of a
+#: unit petgap cannot convert).
 INSTRUMENT_FILES = {
     "cut-header": ("cut.top", wsxm(cut_header=200), "",
                    ["cut inside its header", "no [Header end] line"]),
@@ -826,6 +828,7 @@ def _refused(proc, scene, fragments, leading=None):
                         f"left {proc['leftovers']}")
     problems += [f"missing {f!r}" for f in fragments if f not in err]
     line = err.split("petgap: error: ", 1)[-1].removeprefix(f"{scene}: ")
+    line = re.sub(r"^[a-z_.]+ = '[^']*': ", "", line)   # the key a unit error names first
     if leading is not None and not line.startswith((f"topography {leading}",
                                                     f"topography file {leading}")):
         problems.append(f"does not lead with the file {leading}")

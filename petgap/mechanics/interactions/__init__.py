@@ -47,9 +47,18 @@ def from_attributes(kind, get):
     return law_class(kind).from_attributes(get)
 
 
-def from_scene(section):
-    """The law of a scene's validated ``[interaction]`` section."""
-    return from_attributes(section.kind, lambda key: getattr(section, key))
+def from_scene(section, work=None):
+    """The law of a scene's validated ``[interaction]`` section.
+
+    ``work``: which of the section's works of adhesion (a scene may list several, a
+    series of adhesive steps); by default its first.
+    """
+    def get(key):
+        value = getattr(section, key)
+        if key == "work_of_adhesion" and isinstance(value, tuple):
+            return value[0] if work is None else work
+        return value
+    return from_attributes(section.kind, get)
 
 
 __all__ = ["InteractionLaw", "AdhesionLaw", "HardWall", "ExponentialAdhesion",
