@@ -18,6 +18,7 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.app.build import build, load_scene
+from petgap.app.flow_step import FLOW_FIELDS, flow_of_step, write_flow
 from petgap.io.results import (OutputPathError, ResultExistsError, ResultFile,
                                 check_free_space, existing_result, output_path_error)
 from petgap.io.lock import ResultLock, lock_path
@@ -310,14 +311,16 @@ def _run_steps(model, output, log, resume):
             log.info("step %d (%s): complete in the file, not recomputed", step.index, step.chain)
             continue
         _log_solution(log, step, state)
-        summary = _write_step(model, output, step, state)
+        flow = flow_of_step(model, step, state, log)
+        summary = _write_step(model, output, step, state, flow)
         state.summary = summary
         summaries.append(summary)
     return summaries
 
 
-def _write_step(model, output, step, solution):
-    """Write one solved step into the result file (collective); returns its summary."""
+def _write_step(model, output, step, solution, flow=None):
+    """Write one solved step, and its flow if it has one, into the result file
+    (collective); returns its summary."""
     scene, grid, comm = model.scene, model.grid, model.grid.comm
     stats, fields = model.statistics, scene.output.fields
     scalars = solution.scalars()
@@ -333,7 +336,8 @@ def _write_step(model, output, step, solution):
                          "rms_curvature": stats.rms_curvature},
              "pixel_size": [grid.dx, grid.dy]}
     # a full disk is a clean error before the file is touched (see petgap.io.results)
-    check_free_space(output, 8 * grid.npoints * len(set(fields) - {"topography"}), comm)
+    nfields = len(set(fields) - {"topography"}) + (len(FLOW_FIELDS) if flow else 0)
+    check_free_space(output, 8 * grid.npoints * nfields, comm)
     with _hold_sigterm(), ResultFile.open_for_append(output, comm) as result:
         group = result.begin_step(step.index, attrs=attrs)
         units = _units(scene)
@@ -347,6 +351,7 @@ def _write_step(model, output, step, solution):
             u = solution.gap + model.topography
             u -= grid.mean(u)
             result.write_field("displacement", grid, u, group=group, units=units)
+        write_flow(result, grid, group, flow, units)
         result.end_step(group)
         result.close(complete=False)
     return dict(scalars, index=step.index, chain=step.chain)

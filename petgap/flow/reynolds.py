@@ -41,7 +41,7 @@ decomposition as it is, uneven blocks included.)
 The linear system is scaled: the unknown is the pressure over ``dp``, the conductances
 ``g^3`` over the largest ``g^3`` of the map, so the matrix has entries of order one
 whatever the units.  It is symmetric positive definite, solved by PETSc's conjugate
-gradients with algebraic multigrid; the options prefix ``flow_`` reaches the solver
+gradients with algebraic multigrid (:data:`PC_TYPE`); the options prefix ``flow_`` reaches the solver
 (``-flow_ksp_type``, ``-flow_pc_type``, ``-flow_ksp_rtol``, ``-flow_ksp_monitor`` ...).
 """
 import time
@@ -55,9 +55,10 @@ from petgap.analysis._slabs import fetch_rows, global_shape, local_rows, pixel
 OPTIONS_PREFIX = "flow_"
 #: Relative residual at which the flow solve stops (``-flow_ksp_rtol`` overrides it).
 RTOL = 1e-10
-#: The default preconditioner (``-flow_pc_type`` overrides it; docs/benchmarks.md
-#: measures it against hypre's BoomerAMG).
-PC_TYPE = "gamg"
+#: The default preconditioner (``-flow_pc_type`` overrides it): hypre's BoomerAMG where
+#: PETSc has hypre (Debian's does), which takes fewer iterations and less time than GAMG
+#: on the gap fields of rough contacts (docs/benchmarks.md), else PETSc's own GAMG.
+PC_TYPE = "hypre" if PETSc.Sys.hasExternalPackage("hypre") else "gamg"
 
 
 def harmonic_mean(a, b):
@@ -184,6 +185,8 @@ class KrylovSolve:
         ksp.setOperators(matrix)
         ksp.setType("cg")
         ksp.getPC().setType(PC_TYPE)
+        if PC_TYPE == "hypre":
+            ksp.getPC().setHYPREType("boomeramg")
         ksp.setTolerances(rtol=RTOL, atol=0.0, max_it=10000)
         ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
         ksp.setFromOptions()
