@@ -14,6 +14,7 @@ import numpy as np
 from petgap import analysis
 from petgap.app.figures import pyplot
 from petgap.app.flow_step import FLOW_FIELDS
+from petgap.app.overview import draw_map, finish_maps
 
 #: The table's flow columns and the step attributes they come from.
 FLOW_ATTRIBUTES = {
@@ -63,20 +64,9 @@ def draw_flow_maps(maps, path):
     """The pressure map and the flux magnitude map of one step side by side."""
     plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10.4, 4.6))
-    for ax, m, label, cmap in ((axes[0], maps.pressure, "fluid pressure $p$ (blank: no flow)",
-                                "coolwarm"),
-                               (axes[1], maps.flux, "flux magnitude $|q|$", "Blues")):
-        image = ax.imshow(m.values.T, origin="lower", extent=m.extent, cmap=cmap,
-                          interpolation="nearest", aspect="equal")
-        blocks = "" if m.factor == 1 else f"  [{m.factor}x{m.factor} block means]"
-        ax.set_title(label + blocks, fontsize=9)
-        ax.set_xlabel("$x$")
-        ax.set_ylabel("$y$")
-        fig.colorbar(image, ax=ax, shrink=0.85)
-    fig.suptitle(maps.title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    draw_map(fig, axes[0], maps.pressure, "fluid pressure $p$ (blank: no flow)", "coolwarm")
+    draw_map(fig, axes[1], maps.flux, "flux magnitude $|q|$", "Blues")
+    finish_maps(plt, fig, maps.title, path)
 
 
 def percolation_threshold(rows):

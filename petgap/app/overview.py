@@ -55,19 +55,29 @@ def draw_maps(step_maps, path):
     for ax, (name, label, cmap) in zip(axes.flat, panels):
         m = step_maps.maps[name]
         kwargs = {"vmin": 0.0, "vmax": 1.0} if name == "contact" else {}
-        image = ax.imshow(m.values.T, origin="lower", extent=m.extent, cmap=cmap,
-                          interpolation="nearest", aspect="equal", **kwargs)
         if name == "contact" and 0 < step_maps.contact_fraction < 1:
             x = (np.arange(m.values.shape[0]) + 0.5) * (m.extent[1] / m.values.shape[0])
             y = (np.arange(m.values.shape[1]) + 0.5) * (m.extent[3] / m.values.shape[1])
             ax.contour(x, y, m.values.T, levels=[0.5], colors="tab:red", linewidths=0.6)
             label = f"contact, c = {step_maps.contact_fraction:.4g} (edge in red)"
-        blocks = "" if m.factor == 1 else f"  [{m.factor}x{m.factor} block means]"
-        ax.set_title(label + blocks, fontsize=9)
-        ax.set_xlabel("$x$")
-        ax.set_ylabel("$y$")
-        fig.colorbar(image, ax=ax, shrink=0.85)
-    fig.suptitle(step_maps.title, fontsize=10)
+        draw_map(fig, ax, m, label, cmap, **kwargs)
+    finish_maps(plt, fig, step_maps.title, path)
+
+
+def draw_map(fig, ax, m, label, cmap, **kwargs):
+    """One :class:`petgap.analysis.Map` on ``ax``, titled, with its colour bar."""
+    image = ax.imshow(m.values.T, origin="lower", extent=m.extent, cmap=cmap,
+                      interpolation="nearest", aspect="equal", **kwargs)
+    blocks = "" if m.factor == 1 else f"  [{m.factor}x{m.factor} block means]"
+    ax.set_title(label + blocks, fontsize=9)
+    ax.set_xlabel("$x$")
+    ax.set_ylabel("$y$")
+    fig.colorbar(image, ax=ax, shrink=0.85)
+
+
+def finish_maps(plt, fig, title, path):
+    """Title, lay out, save and close a figure of maps."""
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -16,10 +16,11 @@ nx = 64
 ny = 48
 
 [surface]
-hurst = 0.8
-lambda_min = "8 a0"
+kind = "self-affine"
 rms_slope = 0.1
-seed = 3
+hurst = 0.7
+lambda_min = "6 a0"
+seed = 5
 
 [control]
 kind = "load"
