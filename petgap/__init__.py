@@ -54,6 +54,10 @@ importing only from those before it:
     (a field block-averaged for display), :func:`fit_kappa_rep` and
     :func:`fit_gap_law` (the laws of a load sweep),
     ... on a grid and field slabs (:mod:`petgap.analysis` has them all).
+``petgap.flow``
+    :func:`leakage_of` (leak rate, transmissivity, flow factor, percolation, pressure and
+    flux maps of a solved contact, by the Reynolds equation on its gap), :func:`leakage`
+    (the same on a grid and a gap slab), :class:`Leakage`.
 ``petgap.reference_solutions``
     Westergaard, Hertz and Johnson closed forms (the module itself).
 ``petgap.app``
@@ -80,6 +84,7 @@ from petgap.analysis import (  # noqa: E402
     contact_statistics, contact_statistics_of, fit_power_law, gap_distribution,
     gap_distribution_of, inverse_kappa_att, near_contact_area, near_contact_area_of,
     contact_patches, block_map, fit_kappa_rep, fit_gap_law)
+from petgap.flow import Leakage, leakage, leakage_of  # noqa: E402
 from petgap.app import ContactResult, run_scene  # noqa: E402
 from petgap.app.build import load_scene  # noqa: E402
 from petgap.app.contact import contact  # noqa: E402  (petgap.app keeps the module's name)
@@ -118,6 +123,8 @@ __all__ = [
     "fit_power_law", "near_contact_area", "attractive_force_measured",
     "attractive_force_eq16", "inverse_kappa_att", "contact_patches", "block_map",
     "fit_kappa_rep", "fit_gap_law",
+    # flow
+    "leakage", "leakage_of", "Leakage",
     # reference solutions
     "reference_solutions",
     # app

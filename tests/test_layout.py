@@ -5,7 +5,7 @@ alike), nothing is imported:
 
 * no import cycle between modules;
 * imports between subpackages only point down the data flow
-  ``parallel < (io, surfaces) < mechanics < solvers < analysis < app``;
+  ``parallel < (io, surfaces) < mechanics < solvers < analysis < flow < app``;
   ``reference_solutions`` imports nothing of petgap and anyone may import it;
   ``io.scene`` imports only the collective helpers (its file is read on rank 0
   and broadcast); a subpackage's ``__init__`` may import
@@ -28,7 +28,7 @@ PACKAGE = ROOT / "petgap"
 
 #: Position of each subpackage in the data flow; imports only go to a lower rank.
 RANK = {"parallel": 0, "io": 1, "surfaces": 1, "mechanics": 2, "solvers": 3, "analysis": 4,
-        "app": 5}
+        "flow": 5, "app": 6}
 #: Importable by any subpackage; imports nothing of petgap.
 FREE = "reference_solutions"
 #: Top-level modules that import nothing of petgap and that every module may import.

@@ -47,6 +47,7 @@ def test_subpackages_are_reexported_from():
     assert petgap.Scene is petgap.io.Scene
     assert petgap.run_scene is petgap.app.run_scene
     assert petgap.contact_statistics_of is petgap.analysis.contact_statistics_of
+    assert petgap.leakage_of is petgap.flow.leakage_of and petgap.leakage is petgap.flow.leakage
     # where a function shares its module's name, the subpackage keeps the module
     assert inspect.ismodule(petgap.surfaces.self_affine)
     assert inspect.ismodule(petgap.app.contact)

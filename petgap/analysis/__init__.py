@@ -6,7 +6,9 @@ the near-contact area of Eq. 14), :mod:`.adhesion` (the attractive force, Eqs.
 15-16, ``1 / kappa_att``), :mod:`.load_curves` (``kappa_rep`` and the exponential mean-gap law
 of a load sweep), :mod:`.maps` (fields
 block-averaged for display), :mod:`.patches` (the connected contact
-patches, their areas and perimeters), :mod:`.of_solution` (the same applied to a problem and
+patches, their areas and perimeters), :mod:`.components` (connected components across
+slabs and seams, and whether they wrap round the cell), :mod:`.percolation` (the open
+clusters of the gap and whether they cross the map), :mod:`.of_solution` (the same applied to a problem and
 its solution) and :mod:`._slabs` (slab bookkeeping shared by them).
 
 Every function works on a :class:`~petgap.parallel.grid.Grid`'s row slabs, ``(nx_local, ny)``,
@@ -58,6 +60,8 @@ from petgap.analysis.adhesion import (  # noqa: F401  (the package's API)
     attractive_force_measured, attractive_force_eq16, inverse_kappa_att, fig4_integrand, AttractiveForce, Eq16Force, GAMMA_2_3,
     attractive_force_by_gap, ForceByGap)
 from petgap.analysis.patches import contact_patches, Patches  # noqa: F401  (the package's API)
+from petgap.analysis.components import label_components, Components  # noqa: F401  (the package's API)
+from petgap.analysis.percolation import open_clusters, Percolation  # noqa: F401  (the package's API)
 from petgap.analysis.load_curves import fit_kappa_rep, fit_gap_law, KappaFit, GapLawFit, KAPPA_C_MAX  # noqa: F401  (the package's API)
 from petgap.analysis.maps import block_map, decimation_factor, Map, MAX_PIXELS  # noqa: F401  (the package's API)
 from petgap.analysis.of_solution import (  # noqa: F401  (the package's API)
@@ -72,6 +76,7 @@ __all__ = ["contact_mask", "resolve_gap_tolerance", "GAP_ROUND_OFF", "perimeter"
            "GapDistribution", "PowerLawFit", "NearContactArea", "AttractiveForce",
            "Eq16Force", "GAMMA_2_3", "contact_statistics_of", "gap_distribution_of",
            "attractive_force_of", "near_contact_area_of", "contact_patches", "Patches",
+           "label_components", "Components", "open_clusters", "Percolation",
            "block_map", "decimation_factor", "Map", "MAX_PIXELS",
            "fit_kappa_rep", "fit_gap_law", "KappaFit", "GapLawFit", "KAPPA_C_MAX", "BINS_PER_DECADE", "DEFAULT_RANGE",
            "FIT_RESOLUTION_FACTOR", "FIT_X_MAX", "FIT_SLOPE_BAND", "FIT_SLOPE_WINDOW",

@@ -8,21 +8,18 @@ non-periodic map (``periodic=False``: a measured topography solved with a free
 boundary) nothing joins across the edge of the map, and the edge of the map is not
 part of any perimeter (it is where the data ends, not a contact line).
 
-How it runs in parallel: each rank labels its own slab (:func:`scipy.ndimage.label`),
-its labels are numbered after those of the ranks before it, and the pairs of labels
-that touch across a slab face (one halo row fetched from the neighbouring rank) or
-across the periodic seam are sent to rank 0, which joins them
-(:func:`scipy.sparse.csgraph.connected_components`) and numbers the patches in a
-rank-independent order: by the smallest global pixel index ``i * ny + j`` each
-patch holds.  Only labels and boundary pairs travel, never the field; areas and
-perimeters are then summed per patch over all ranks.  The result is the same for
-any number of ranks.
+How it runs in parallel: the patches are labelled across slabs and seams by
+:func:`petgap.analysis.components.label_components` (only labels and boundary pairs
+travel, never the field) and numbered in a rank-independent order, by the smallest
+global pixel index ``i * ny + j`` each patch holds; areas and perimeters are then
+summed per patch over all ranks.  The result is the same for any number of ranks.
 """
 from dataclasses import dataclass
 
 import numpy as np
 from mpi4py import MPI
 from petgap.analysis._slabs import check_fields, fetch_rows, global_shape, local_rows, pixel
+from petgap.analysis.components import label_components
 
 
 @dataclass
@@ -95,65 +92,14 @@ def contact_patches(grid, mask, *, periodic=True):
         Join patches across the cell's edges (a periodic solution) or not (a map with
         a free boundary).
     """
-    # deferred: importing SciPy changes warning filters, which `import petgap` must not do
-    from scipy import ndimage
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     comm = grid.comm
     mask = check_fields(grid, mask=mask)["mask"]
     nx, ny = global_shape(grid)
     start, stop = local_rows(grid)
     dx, dy = pixel(grid)
 
-    local, nlocal = ndimage.label(mask)
-    offset = comm.exscan(nlocal, op=MPI.SUM) if comm.size > 1 else 0
-    offset = int(offset or 0)
-    total = int(comm.allreduce(nlocal, op=MPI.SUM))
-    labels = np.where(local > 0, local + offset, 0).astype(np.int64)
-
-    # pairs of labels that touch across the slab face below (row stop) and the y seam
-    pairs = []
-    want_below = stop < nx or periodic
-    below = fetch_rows(grid, [labels.astype(np.float64)],
-                       [stop] if (want_below and stop > start) else [])
-    if below.shape[1]:
-        mine, theirs = labels[-1], below[0, 0].astype(np.int64)
-        touch = (mine > 0) & (theirs > 0)
-        pairs.append(np.stack([mine[touch], theirs[touch]], axis=1))
-    if periodic and ny > 1 and labels.size:
-        touch = (labels[:, 0] > 0) & (labels[:, -1] > 0)
-        pairs.append(np.stack([labels[touch, 0], labels[touch, -1]], axis=1))
-    pairs = np.concatenate(pairs) if pairs else np.empty((0, 2), dtype=np.int64)
-
-    # each local label's first global pixel, to number the patches independently of ranks
-    first = np.empty(nlocal, dtype=np.int64)
-    if nlocal:
-        index = (np.arange(start, stop, dtype=np.int64)[:, None] * ny
-                 + np.arange(ny, dtype=np.int64)[None, :])
-        first[:] = ndimage.minimum(index, local, np.arange(1, nlocal + 1))
-    gathered = comm.gather((pairs, first), root=0)
-    mapping = None
-    if comm.rank == 0:
-        all_pairs = np.concatenate([p for p, _ in gathered]) - 1
-        all_first = np.concatenate([f for _, f in gathered])
-        graph = coo_matrix((np.ones(len(all_pairs)), (all_pairs[:, 0], all_pairs[:, 1])),
-                           shape=(total, total))
-        ncomp, comp = connected_components(graph, directed=False)
-        comp_first = np.full(ncomp, np.iinfo(np.int64).max, dtype=np.int64)
-        np.minimum.at(comp_first, comp, all_first)
-        order = np.argsort(comp_first, kind="stable")
-        rank_of = np.empty(ncomp, dtype=np.int64)
-        rank_of[order] = np.arange(ncomp)
-        mapping = np.concatenate([[-1], rank_of[comp]]).astype(np.int64)
-        first_pixel = comp_first[order]
-    else:
-        first_pixel = None
-    mapping = comm.bcast(mapping, root=0)
-    first_pixel = comm.bcast(first_pixel, root=0)
-    count = len(first_pixel)
-
-    patch = mapping[labels]
+    components = label_components(grid, mask, periodic=periodic)
+    count, patch = components.count, components.labels
     pixels = np.bincount(patch[mask], minlength=count).astype(np.int64)
 
     # pixel edges to a non-contact neighbour, charged to the contact pixel's patch
@@ -179,4 +125,4 @@ def contact_patches(grid, mask, *, periodic=True):
     pixels = comm.allreduce(pixels, op=MPI.SUM)
     edges = comm.allreduce(edges, op=MPI.SUM)
     return Patches(count=count, pixels=pixels, areas=pixels * dx * dy, perimeters=edges,
-                   first_pixel=np.asarray(first_pixel, dtype=np.int64), periodic=bool(periodic))
+                   first_pixel=components.first_pixel, periodic=bool(periodic))

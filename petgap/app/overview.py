@@ -74,23 +74,36 @@ def draw_maps(step_maps, path):
         kwargs = {"vmin": 0.0, "vmax": 1.0} if name == "contact" else {}
         if name == "pressure":
             kwargs, label = _pressure_scale(m.values, label)
-        image = ax.imshow(m.values.T, origin="lower", extent=m.extent, cmap=cmap,
-                          interpolation="nearest", aspect="equal", **kwargs)
         if name == "contact" and 0 < step_maps.contact_fraction < 1:
             x = (np.arange(m.values.shape[0]) + 0.5) * (m.extent[1] / m.values.shape[0])
             y = (np.arange(m.values.shape[1]) + 0.5) * (m.extent[3] / m.values.shape[1])
             ax.contour(x, y, m.values.T, levels=[0.5], colors="tab:red", linewidths=0.6)
             label = f"contact, c = {step_maps.contact_fraction:.4g} (edge in red)"
-        blocks = "" if m.factor == 1 else f"  [{m.factor}x{m.factor} block means]"
-        ax.set_title(label + blocks, fontsize=9)
-        ax.set_xlabel(unit_label("$x$", length))
-        ax.set_ylabel(unit_label("$y$", length))
-        bar = fig.colorbar(image, ax=ax, shrink=0.85,
-                           extend="max" if name == "pressure" and "vmax" in kwargs else "neither")
-        if name != "contact":
-            bar.set_label(unit_label(label.split(",")[0].split(" (")[0],
-                                     pressure if name == "pressure" else length))
-    fig.suptitle(step_maps.title, fontsize=10)
+        draw_map(fig, ax, m, label, cmap, length=length,
+                 bar_unit=None if name == "contact" else
+                 (pressure if name == "pressure" else length),
+                 extend="max" if name == "pressure" and "vmax" in kwargs else "neither",
+                 **kwargs)
+    finish_maps(plt, fig, step_maps.title, path)
+
+
+def draw_map(fig, ax, m, label, cmap, length="1", bar_unit=None, extend="neither", **kwargs):
+    """One :class:`petgap.analysis.Map` on ``ax``, titled, its axes in ``length``, with its
+    colour bar (labelled with ``bar_unit`` if given)."""
+    image = ax.imshow(m.values.T, origin="lower", extent=m.extent, cmap=cmap,
+                      interpolation="nearest", aspect="equal", **kwargs)
+    blocks = "" if m.factor == 1 else f"  [{m.factor}x{m.factor} block means]"
+    ax.set_title(label + blocks, fontsize=9)
+    ax.set_xlabel(unit_label("$x$", length))
+    ax.set_ylabel(unit_label("$y$", length))
+    bar = fig.colorbar(image, ax=ax, shrink=0.85, extend=extend)
+    if bar_unit is not None:
+        bar.set_label(unit_label(label.split(",")[0].split(" (")[0], bar_unit))
+
+
+def finish_maps(plt, fig, title, path):
+    """Title, lay out, save and close a figure of maps."""
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -125,7 +125,7 @@ from mpi4py import MPI  # noqa: E402
 
 from petgap import analysis  # noqa: E402
 from petgap.app.argtypes import positive_float, positive_int, root_parser  # noqa: E402
-from petgap.app import overview, report  # noqa: E402
+from petgap.app import flow_post, overview, report  # noqa: E402
 from petgap.app.figures import fig2_series, fig3_series, figure2, figure3, figure4  # noqa: E402
 from petgap.app.tables import plain, plain_rows, write_csv, write_json  # noqa: E402
 from petgap.io.results import (ResultFile, read_attrs, read_field, step_name,  # noqa: E402
@@ -173,7 +173,7 @@ COLUMNS = [
     "c_solver", "kappa_rep_solver", "inv_kappa_att_solver",
     "mean_gap", "patches", "patch_area_mean", "patch_area_max", "control", "control_value",
     "solver", "converged", "reason", "iterations", "kkt_pressure", "kkt_gap", "wall_time",
-]
+] + flow_post.FLOW_COLUMNS
 #: Solver status columns and the step attributes they come from.
 STATUS = {"control": ("solution.control", str), "control_value": ("solution.control_value", float),
           "solver": ("solution.solver", str), "converged": ("solution.converged", bool),
@@ -299,6 +299,7 @@ class StepResult:
     meta: dict = field(default_factory=dict)
     patches: object = None
     maps: object = None          # overview.StepMaps on the root rank, else None
+    flow_maps: object = None     # flow_post.FlowMaps on the root rank, else None
 
 
 def analyse_step(result, index, args, grids, comm, log, surface=None):
@@ -392,6 +393,9 @@ def analyse_step(result, index, args, grids, comm, log, surface=None):
                patch_area_max=float(np.max(patches.areas)) if patches.count else None)
     for column, (attribute, convert) in STATUS.items():
         row[column] = attrs.find([attribute], column, required=False, kind=convert)[0]
+    flow_row, flow_maps = flow_post.analyse_flow(group, attrs, grid, args.map_pixels,
+                                                 f"{where}: flow through the gaps")
+    row.update(flow_row)
     x = y = np.empty(0)
     usable = 0 < c < 1 and math.isfinite(g0) and g0 > 0
     fit_note = None
@@ -478,7 +482,7 @@ def analyse_step(result, index, args, grids, comm, log, surface=None):
     step_maps = overview.StepMaps(maps, c, title, (row["length_unit"], row["pressure_unit"])) \
         if comm.rank == 0 else None
     return StepResult(row=row, distribution=dist, x=x, y=y, adhesive=adhesive, meta=meta,
-                      patches=patches, maps=step_maps)
+                      patches=patches, maps=step_maps, flow_maps=flow_maps)
 
 
 def _interaction_law(attrs, where):
@@ -1025,6 +1029,17 @@ def _run(args, inputs, comm, log):
                 overview.draw_maps(r.maps, d / f"{base}.{fmt}")
                 r.maps.save(d / f"{base}.npz")
                 add(f"{base}.{fmt}", r.maps.title, "maps", path, r.row["step"])
+                if r.flow_maps is not None:
+                    name = f"{stem}-step{r.row['step']:04d}-flow.{fmt}"
+                    flow_post.draw_flow_maps(r.flow_maps, d / name)
+                    add(name, r.flow_maps.title, "flow-maps", path, r.row["step"])
+            flowing = flow_post.flow_rows([r.row for r in steps])
+            if len(flowing) >= 2:
+                name = f"{stem}-leakage.{fmt}"
+                flow_post.draw_leakage_curve(flowing, d / name,
+                                             f"{path}: leakage of {len(flowing)} steps")
+                add(name, f"{path}: transmissivity against load and mean gap, percolation",
+                    "leakage", path)
             if len(steps) >= 2:
                 name = f"{stem}-sweep.{fmt}"
                 overview.draw_sweep([r.row for r in steps], sweeps[path], d / name,

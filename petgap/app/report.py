@@ -14,6 +14,7 @@ import math
 from pathlib import Path
 
 from petgap._version import __version__
+from petgap.app.flow_post import threshold_text
 
 REPORT = "report.html"
 
@@ -31,6 +32,16 @@ STATUS_COLUMNS = [
     ("reason", "reason", "s"), ("iterations", "iterations", "d"),
     ("kkt_pressure", "KKT (pressure)", ".2e"), ("kkt_gap", "KKT (gap)", ".2e"),
     ("wall_time", "wall time / s", ".3g"),
+]
+#: Columns of the flow table (steps with a ``[flow]`` result).
+FLOW_COLUMNS = [
+    ("step", "step", "d"), ("c", "c", ".4g"), ("mean_pressure", "P0", ".4g"),
+    ("mean_gap", "mean gap", ".4g"), ("flow_leak_rate", "leak rate Q", ".4g"),
+    ("flow_transmissivity", "transmissivity K", ".4g"), ("flow_factor", "flow factor", ".4g"),
+    ("flow_percolates", "percolates", "s"), ("flow_open_fraction", "open", ".4g"),
+    ("flow_largest_cluster_fraction", "largest cluster", ".4g"),
+    ("flow_converged", "converged", "s"), ("flow_reason", "reason", "s"),
+    ("flow_iterations", "iterations", "d"), ("flow_conservation", "mass balance", ".1e"),
 ]
 SURFACE_COLUMNS = [
     ("nx", "nx", "d"), ("ny", "ny", "d"), ("dx", "dx", ".4g"), ("dy", "dy", ".4g"),
@@ -84,6 +95,11 @@ def not_converged(row):
     return row.get("converged") is False
 
 
+def flow_failed(row):
+    """A flow solve that did not converge (a step that does not percolate did not solve)."""
+    return row.get("flow_converged") is False
+
+
 def _image(directory, name):
     path = Path(directory) / name
     if path.suffix.lower() == ".png" and path.is_file():
@@ -131,6 +147,13 @@ def render(directory, *, inputs, figures, rows, surfaces, sweeps, command_line, 
             parts.append("<h3>Results per step</h3>" + _table(mine, STEP_COLUMNS, not_converged))
             parts.append("<h3>Solver status per step</h3>"
                          + _table(mine, STATUS_COLUMNS, not_converged))
+        flowing = [r for r in mine if r.get("flow_leak_rate") is not None]
+        if flowing:
+            parts.append("<h3>Flow through the gaps</h3><p>Reynolds flow on each step's gap, "
+                         f"along {html.escape(str(flowing[0].get('flow_direction')))}; "
+                         "transmissivity K = 12 mu Q L / (W dp), flow factor K / (mean gap)^3. "
+                         f"{html.escape(threshold_text(flowing))}.</p>"
+                         + _table(flowing, FLOW_COLUMNS, flow_failed))
         fits = sweeps.get(key)
         if fits and len(mine) >= 2:
             parts.append("<h3>Laws of the sweep</h3>" + _table([fits], [

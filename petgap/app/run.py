@@ -19,6 +19,7 @@ from mpi4py import MPI
 
 from petgap.analysis.of_solution import contact_statistics_of
 from petgap.app.build import build, load_scene
+from petgap.app.flow_step import FLOW_FIELDS, flow_of_step, write_flow
 from petgap.io.results import (OutputPathError, ResultExistsError, ResultFile,
                                 check_free_space, existing_result, output_path_error)
 from petgap.io.lock import ResultLock, lock_path
@@ -322,7 +323,8 @@ def _run_steps(model, output, log, resume):
             continue
         _log_solution(log, step, state)
         wall_times.append(state.wall_time)
-        summary = _write_step(model, output, step, state)
+        flow = flow_of_step(model, step, state, log)
+        summary = _write_step(model, output, step, state, flow)
         state.summary = summary
         summaries.append(summary)
         if not patches_told:   # once a run: the first step with small patches speaks for all
@@ -340,8 +342,9 @@ def _check_patches(model, step, state, log):
         model.scene.checks.plausibility, f"step {step.index}", log, grid.comm)
 
 
-def _write_step(model, output, step, solution):
-    """Write one solved step into the result file (collective); returns its summary."""
+def _write_step(model, output, step, solution, flow=None):
+    """Write one solved step, and its flow if it has one, into the result file
+    (collective); returns its summary."""
     scene, grid, comm = model.scene, model.grid, model.grid.comm
     stats, fields = model.statistics, scene.output.fields
     scalars = solution.scalars()
@@ -357,7 +360,8 @@ def _write_step(model, output, step, solution):
                          "rms_curvature": stats.rms_curvature},
              "pixel_size": [grid.dx, grid.dy]}
     # a full disk is a clean error before the file is touched (see petgap.io.results)
-    check_free_space(output, 8 * grid.npoints * len(set(fields) - {"topography"}), comm)
+    nfields = len(set(fields) - {"topography"}) + (len(FLOW_FIELDS) if flow else 0)
+    check_free_space(output, 8 * grid.npoints * nfields, comm)
     with _hold_sigterm(), ResultFile.open_for_append(output, comm) as result:
         group = result.begin_step(step.index, attrs=attrs)
         units = _units(scene)
@@ -371,6 +375,7 @@ def _write_step(model, output, step, solution):
             u = solution.gap + model.topography
             u -= grid.mean(u)
             result.write_field("displacement", grid, u, group=group, units=units)
+        write_flow(result, grid, group, flow, units)
         result.end_step(group)
         result.close(complete=False)
     return dict(scalars, index=step.index, chain=step.chain)

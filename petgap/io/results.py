@@ -370,6 +370,10 @@ FIELD_LABELS = {
     "pressure": ("contact pressure, positive in compression", "pressure"),
     "displacement": ("normal surface displacement of the elastic half-space, zero mean",
                      "length"),
+    "flow_pressure": ("fluid pressure of the Reynolds flow through the gap (NaN where no "
+                      "fluid flows)", "pressure"),
+    "flow_flux_x": ("volume flux per unit width along x, cell-centred", "flux"),
+    "flow_flux_y": ("volume flux per unit width along y, cell-centred", "flux"),
 }
 #: Names of the coordinate datasets (dimension scales) along the grid's axes.
 COORDINATES = ("x", "y")

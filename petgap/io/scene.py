@@ -2,7 +2,7 @@
 
 A scene is a TOML file (read with the standard library's :mod:`tomllib`) with one
 table per stage of a run: ``[grid]``, ``[surface]``, ``[material]``,
-``[interaction]``, ``[control]``, ``[solver]`` and ``[output]``.  Its schema is
+``[interaction]``, ``[control]``, ``[solver]``, ``[output]``, ``[units]`` and ``[flow]``.  Its schema is
 declared once, in this module, as frozen dataclasses whose fields carry a
 :class:`Key` (type, default, allowed values, documentation); validation, the
 defaults, the error messages and :func:`describe_schema` are all derived from
@@ -45,7 +45,7 @@ from petgap.parallel.collective import root_decides
 
 __all__ = ["SceneError", "Scene", "GridSection", "SurfaceSection", "MaterialSection",
            "InteractionSection", "ControlSection", "SolverSection", "OutputSection", "UnitsSection",
-           "ChecksSection",
+           "ChecksSection", "FlowSection",
            "schema_default",
            "describe_schema", "to_toml"]
 
@@ -914,6 +914,51 @@ class ChecksSection:
                             "after the step that shows it), or nothing")
 
 
+@dataclass(frozen=True)
+class FlowSection:
+    """Flow through the gaps after each contact step: the Reynolds equation on the gap.
+
+    ``kind = "reynolds"`` solves steady thin-film flow ``div(g^3 grad p) = 0`` on the
+    gap of every non-adhesive step (``petgap.flow``) and stores the leak rate, the
+    transmissivity, the flow factor, the percolation of the open region and the
+    pressure and flux maps beside the gap.  A periodic surface is a periodic cell (the
+    drop imposed across the period); a free boundary has inlet and outlet edges across
+    ``direction`` and sealed sides.
+    """
+    kind: str = key(Choice("none", "reynolds"), "none",
+                    "none: no flow; reynolds: the Reynolds equation on each step's gap")
+    viscosity: float = key(Float(minimum=0, min_open=True), 1.0,
+                           "dynamic viscosity mu, in pressure x time (the leak rate comes out "
+                           "in length^3 per that time)", when=("kind", ["reynolds"]))
+    pressure_drop: float = key(Float(minimum=0, min_open=True), 1.0,
+                               "pressure drop dp along direction, across the period or from "
+                               "inlet to outlet, in the pressure unit",
+                               when=("kind", ["reynolds"]))
+    direction: str = key(Choice("x", "y"), "x", "the direction of the mean flow",
+                         when=("kind", ["reynolds"]))
+
+    @staticmethod
+    def _check(values, ctx, problems):
+        if values["kind"] == "none":
+            return
+        grid, interaction, control = ctx.get("grid"), ctx.get("interaction"), ctx.get("control")
+        if grid is not None:
+            n = grid.shape[0 if values["direction"] == "x" else 1]
+            if n < 2:
+                problems.append(("direction", values["direction"],
+                                 f"the map has {n} pixel along {values['direction']}, too few "
+                                 f"for a pressure drop", "a direction with at least 2 pixels"))
+        if interaction is not None and interaction.kind != "hard-wall" and \
+                (control is None or control.reference is None):
+            problems.append(("kind", values["kind"],
+                             f"every step is adhesive (interaction.kind = "
+                             f"{json.dumps(interaction.kind)}), and where the gap is below "
+                             f"the interaction range the surfaces attract across it: that is "
+                             f"no thin viscous film the Reynolds equation describes",
+                             "flow with a hard-wall interaction, or with control.reference = "
+                             "\"non-adhesive\" (the flow then runs on the non-adhesive steps)"))
+
+
 def _section(cls, doc=None):
     return field(default=None, metadata={"section": cls, "doc": doc or cls.__doc__})
 
@@ -944,6 +989,7 @@ class Scene:
     output: OutputSection = _section(OutputSection)
     units: UnitsSection = _section(UnitsSection)
     checks: ChecksSection = _section(ChecksSection)
+    flow: FlowSection = _section(FlowSection)
     text: str = ""
     path: str = None
     base_dir: str = "."

@@ -49,7 +49,9 @@ KNOWN_OPTIONS = {
 KNOWN_PREFIXES = ("tao_ls_", "tao_bncg_", "tao_blmvm_", "tao_bqnls_", "tao_bqnk_", "tao_bnk_",
                   "tao_gpcg_", "tao_bnls_", "tao_bntr_", "tao_bntl_", "tao_view_",
                   "tao_monitor_", "tao_draw_", "tao_ksp_", "tao_pc_", "tao_mat_lmvm_",
-                  "tao_bqnls_mat_lmvm_")
+                  "tao_bqnls_mat_lmvm_",
+                  # the flow step's Krylov solver and multigrid (petgap.flow, prefix flow_)
+                  "flow_ksp_", "flow_pc_", "flow_mg_")
 
 _TRUE_FALSE = ("true", "false", "yes", "no", "on", "off", "1", "0")
 _SPECIAL = ("petsc_default", "default", "petsc_decide", "decide", "petsc_determine",
