@@ -178,8 +178,12 @@ class PaddedCell:
         start = "; ".join(filter(None, [f"solved on the {cell.nx}x{cell.ny} padded cell"
                                         + (f" ({solves} mean-gap solves)" if solves > 1 else ""),
                                         solution.start]))
+        # the rigid body's position d of g = d + u - h, with the map's own u = C p (the
+        # cell's displacement lacks the mean its periodic q = 0 mode leaves to the control)
+        offset = gap + problem.topography - problem.half_space.displacement(pressure)
+        approach = problem.top_height - grid.comm.allreduce(float(offset.sum())) / grid.npoints
         return problem.make_solution(
             gap, pressure, gap <= 0, control, solver=solution.solver,
             operator_applications=problem.operator_applications
             + on_cell.operator_applications - start_ops, wall_time=timer(), start=start,
-            start_time=solution.start_time, **verdict)
+            start_time=solution.start_time, approach=approach, **verdict)

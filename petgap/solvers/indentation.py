@@ -40,6 +40,7 @@ def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *
         state = touching_state(problem, control, timer)
         state.gap += g_bar - reach
         state.mean_gap = g_bar
+        state.approach = reach - g_bar
         return state
     start_ops = problem.operator_applications
     depth, previous = reach - g_bar, None
