@@ -93,6 +93,11 @@ class Indentation:
         return self.depth
 
 
+#: The control types by their ``kind`` (the words of the registry of solvers,
+#: :data:`petgap.io.solver_registry.CONTROLS`, and of a scene's ``control.kind``).
+CONTROL_TYPES = {control.kind: control for control in (Load, MeanGap, Indentation)}
+
+
 @dataclass
 class ContactSolution:
     """A solved (or not) contact state and how it was reached.
