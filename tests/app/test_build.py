@@ -246,3 +246,21 @@ def test_single_precision_run_stores_its_fields_in_32_bits(comm, mpi_tmp_path):
         h = read_field(f, "topography", model.grid)
     assert dtypes == [np.float32] * 3 and precision == "single"
     assert h.dtype == np.float64 and np.array_equal(h, model.topography.astype(np.float64))
+
+
+def test_fft_planner_by_the_work_ahead(comm):
+    """solver.planner = "auto" (the default): estimate for one solve, measure for a sweep,
+    saying why; a planner the scene names is kept."""
+    from petgap.app.build import fft_planner, make_grid
+    auto = {k: v for k, v in SCENE["solver"].items() if k != "planner"}
+    one = Scene.from_dict(dict(SCENE, solver=auto, control={"kind": "load", "values": [0.01]}),
+                          comm)
+    many = Scene.from_dict(dict(SCENE, solver=auto), comm)
+    named = Scene.from_dict(dict(SCENE, solver=dict(auto, planner="patient")), comm)
+    grid = make_grid(one, comm)
+    assert one.solver.planner == "auto"
+    assert fft_planner(one) == ("estimate", "auto: one solve ahead; solver.planner = "
+                                "\"measure\" for faster transforms")
+    assert fft_planner(many) == ("measure", "auto: 2 solves ahead, plans kept as wisdom")
+    assert fft_planner(named) == ("patient", "solver.planner")
+    assert grid.planner == "estimate"
