@@ -19,6 +19,7 @@ from mpi4py import MPI
 from petgap.io.solver_registry import method
 from petgap.mechanics.problem import Load, MeanGap
 from petgap.solvers.convergence import Timer
+from petgap.solvers.progress import outer_step
 from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.solvers.tao import tao_solve
 
@@ -200,10 +201,14 @@ def solve_load_by_mean_gap(problem, control, kind, settings, initial=None, monit
     gap_guess, state, iterations = _branch_start(problem, target, settings, initial)
     secant = _LoadSecant(problem, target, state)
     solution, history, negative_curvature, exhausted = state, [], 0, False
-    for outer in range(max_outer):
+    outer_exhausted = False
+    for outer in range(max_outer + 1):
         budget = max_iterations - iterations  # the limit is per step, seed included
         if budget < 1:
             exhausted = True  # (the state is then a trial or the hard-wall seed)
+            break
+        if outer == max_outer:
+            outer_exhausted = True
             break
         solution = tao_solve(problem, MeanGap(max(gap_guess, 0.0)), kind,
                              settings.but(max_iterations=budget), secant.on_branch, monitor)
@@ -211,6 +216,10 @@ def solve_load_by_mean_gap(problem, control, kind, settings, initial=None, monit
         negative_curvature += solution.negative_curvature_steps
         f = solution.mean_pressure - target
         history.append((solution.mean_gap, solution.mean_pressure))
+        outer_step("adhesive load by the mean gap", outer + 1, max_outer, timer,
+                   f"load off by {abs(f) / problem.pressure_scale:.3e} h0' E* (target "
+                   f"{tolerance:.0e}) after {solution.iterations} iterations"
+                   + ("" if solution.converged else f", not converged ({solution.reason})"))
         if not solution.converged or abs(f) <= tolerance * problem.pressure_scale:
             break
         if solution.mean_gap == 0.0 and _carried_in_full_contact(problem, solution, target):
@@ -221,6 +230,7 @@ def solve_load_by_mean_gap(problem, control, kind, settings, initial=None, monit
     converged = not exhausted and solution.converged and \
         abs(solution.mean_pressure - target) <= tolerance * problem.pressure_scale
     reason = "converged_kkt" if converged else "max_iterations" if exhausted else \
+        "max_outer_iterations" if outer_exhausted else \
         (solution.reason if not solution.converged else "load_not_reached")
     result = problem.make_solution(
         solution.gap, solution.pressure, solution.gap <= 0, control, converged=converged,

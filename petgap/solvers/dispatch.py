@@ -70,6 +70,7 @@ from petgap.solvers.free_boundary import PaddedCell
 from petgap.solvers.mixed_precision import solve_mixed
 from petgap.solvers.contact_limits import FullContact, touching_state
 from petgap.solvers.indentation import solve_mean_gap_by_indentation
+from petgap.solvers.progress import SolveProgress
 from petgap.solvers.settings import read_settings
 from petgap.solvers.control_loops import solve_as
 
@@ -109,7 +110,9 @@ def solve(problem, control, *, solver="pcg", tolerance=None, max_iterations=1000
     options : dict, optional
         PETSc options (without the leading dash) set for this solve only.
     monitor : callable, optional
-        ``monitor(iteration, residual)``, called on every rank.
+        ``monitor(iteration, residual)``, called on every rank.  Without one a solve
+        that runs for more than a few seconds logs its progress and its verdict
+        (:class:`petgap.solvers.progress.SolveProgress`, the ``petgap`` logger at INFO).
     precision : {"double", "single", "mixed"}, optional
         Default: the grid's (``"double"`` or ``"single"``).  ``"mixed"`` needs a
         double problem (see "Precision" above).
@@ -127,7 +130,12 @@ def solve(problem, control, *, solver="pcg", tolerance=None, max_iterations=1000
     with petsc_options(options):
         settings = read_settings(problem.grid.precision, solver=solver, tolerance=tolerance,
                                  max_iterations=max_iterations, precision=precision)
-        return run(problem, control, settings, initial=initial, monitor=monitor)
+        if monitor is not None:
+            return run(problem, control, settings, initial=initial, monitor=monitor)
+        progress = SolveProgress(settings.tolerance)
+        solution = run(problem, control, settings, initial=initial, monitor=progress)
+        progress.verdict(solution)
+        return solution
 
 
 def controls_help(indent="    "):

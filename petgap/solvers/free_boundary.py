@@ -42,6 +42,7 @@ from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.collective import move_rows
 from petgap.solvers.convergence import Timer
 from petgap.solvers.control_loops import solve_as
+from petgap.solvers.progress import outer_step
 
 #: Interaction length scales between the cell's surface outside the map and the map's
 #: lowest point: the gap outside stays above this many of them.
@@ -147,6 +148,7 @@ class PaddedCell:
         guess = target + (1 - fraction) * (problem.mean_height - h_out)
         previous, solves, iterations, history = None, 0, 0, []
         converged, reason = False, "max_solves"
+        timer = Timer()
         while solves < self.max_solves:
             solution = solve_as(on_cell, MeanGap(guess), kind, settings, warm, monitor)
             solves += 1
@@ -154,6 +156,10 @@ class PaddedCell:
             history.extend(solution.history)
             gap = _to_map(grid, cell, solution.gap)
             mean = grid.comm.allreduce(float(gap.sum())) / grid.npoints
+            outer_step("the map's mean gap on its padded cell", solves, self.max_solves, timer,
+                       f"mean gap off by {abs(mean - target) / problem.gap_scale:.3e} h0 "
+                       f"(target {settings.tolerance:.0e}) after {solution.iterations} "
+                       f"iterations")
             if not solution.converged:
                 reason = solution.reason
                 break
