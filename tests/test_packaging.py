@@ -63,6 +63,7 @@ def _set_up_packages(tmp_path, script):
     import shutil
     import subprocess
     import sys
+    from conftest import clean_env
     root, fake = tmp_path / "clone", tmp_path / "bin"
     shutil.copytree(ROOT / "scripts", root / "scripts")
     fake.mkdir()
@@ -73,8 +74,9 @@ def _set_up_packages(tmp_path, script):
     for name, body in stubs.items():
         (fake / name).write_text(f"#!/bin/sh\n{body}\n")
         (fake / name).chmod(0o755)
-    env = dict(os.environ, PATH=f"{fake}:{os.environ['PATH']}",
-               PETGAP_VENV=str(Path(sys.executable).parents[1]))
+    # without this job's MPI variables: the set-up imports petgap, which starts MPI
+    env = clean_env({"PATH": f"{fake}:{os.environ['PATH']}",
+                     "PETGAP_VENV": str(Path(sys.executable).parents[1])})
     env.pop("PETGAP_EXTRA_PACKAGES", None)
     proc = subprocess.run(["bash", str(root / "scripts" / script)], env=env, cwd=root,
                           capture_output=True, text=True, timeout=300)

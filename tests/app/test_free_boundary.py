@@ -172,3 +172,31 @@ def test_free_solutions_report_their_approach(comm):
     assert loaded.converged and loaded.approach == pytest.approx(2.0, rel=1e-6)
     assert adhesive.converged and adhesive.approach == pytest.approx(2.0, rel=1e-4)
     assert np.isnan(periodic.approach)
+
+
+def test_a_free_mean_gap_reports_its_outer_steps(comm):
+    """Mean-gap control on a free boundary is a loop of indentation solves: each step is
+    reported with the loop's bound and its residual against the target."""
+    import logging
+    from petgap.mechanics import ContactProblem, FreeHalfSpace, Indentation, MeanGap
+    from petgap.parallel import Grid
+    from petgap.solvers import solve
+    grid = Grid((64, 64), comm=comm, planner="estimate", wisdom=False)
+    problem = ContactProblem(grid, indenters.indenter(grid, "paraboloid", 200.0),
+                             FreeHalfSpace(grid, 1.0))
+    pressed = solve(problem, Indentation(2.0))
+    lines, logger = [], logging.getLogger("petgap")
+    handler, level = logging.Handler(), logger.level
+    handler.emit = lambda record: lines.append(record.getMessage())
+    logger.addHandler(handler)
+    logger.setLevel("INFO")
+    try:
+        solution = solve(problem, MeanGap(pressed.mean_gap))
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+    assert solution.converged and solution.approach == pytest.approx(2.0, rel=1e-6)
+    if comm.rank == 0:
+        steps = [line for line in lines if "the mean gap by the indentation: step" in line]
+        assert steps and all("of at most 50" in line and "h0 (target 1e-08)" in line
+                             for line in steps)
