@@ -33,7 +33,8 @@ importing only from those before it:
     :class:`Grid` (owns the communicator, the slab decomposition and the FFT).
 ``petgap.surfaces``
     :func:`self_affine`, :func:`statistics`, :func:`radial_psd`,
-    :func:`load_topography`, :func:`save_topography_npy`.
+    :func:`load_topography`, :func:`save_topography_npy`, :func:`read_measured` (an
+    instrument's file, with its size, unit and periodicity).
 ``petgap.io``
     :class:`Scene` (a run described by a TOML file), :class:`SceneError`.
 ``petgap.mechanics``
@@ -95,7 +96,8 @@ from petgap.mechanics import (  # noqa: E402
     SquaredExponentialAdhesion)
 from petgap.parallel import Grid  # noqa: E402
 from petgap.solvers import solve, sweep  # noqa: E402
-from petgap.surfaces import load_topography, radial_psd, save_topography_npy  # noqa: E402
+from petgap.surfaces import (load_topography, radial_psd, read_measured,  # noqa: E402
+                             save_topography_npy)
 from petgap.surfaces.statistics import statistics  # noqa: E402  (petgap.surfaces keeps the module)
 from petgap.surfaces.self_affine import self_affine  # noqa: E402  (the module's name)
 from petgap.parallel.memory import return_freed_memory  # noqa: E402
@@ -108,6 +110,7 @@ __all__ = [
     "Grid",
     # surfaces
     "self_affine", "statistics", "radial_psd", "load_topography", "save_topography_npy",
+    "read_measured",
     # io
     "Scene", "SceneError",
     # mechanics

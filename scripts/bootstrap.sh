@@ -6,7 +6,9 @@
 # environment that mpirun and petgap need (PATH, Open MPI's run-as-root switch).
 # The set-up runs in a subshell with `set -euo pipefail`, so that sourcing this
 # file leaves the caller's shell options as they were (an interactive shell with
-# `set -e` would close on the first failing command).
+# `set -e` would close on the first failing command).  PETGAP_EXTRA_PACKAGES names
+# Debian packages only some callers need (scripts/test.sh: chromium, in which the
+# tests render the report; the main job does not).
 PETGAP_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 PETGAP_VENV=${PETGAP_VENV:-$PETGAP_ROOT/.venv}
 
@@ -16,9 +18,10 @@ set -euo pipefail
 packages=(python3-petsc4py python3-mpi4py python3-h5py-mpi libfftw3-mpi-dev libfftw3-dev
           openmpi-bin libopenmpi-dev python3-numpy python3-scipy python3-matplotlib
           python3-pytest cython3 python3-dev python3-venv build-essential
-          chromium python3-xarray python3-h5netcdf
+          python3-xarray python3-h5netcdf
           python3-tifffile python3-xmltodict python3-defusedxml python3-openpyxl python3-yaml
-          python3-dateutil python3-pil python3-requests python3-pandas)
+          python3-dateutil python3-pil python3-requests python3-pandas
+          ${PETGAP_EXTRA_PACKAGES:-})
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

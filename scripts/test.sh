@@ -4,7 +4,9 @@
 # Rank 0 prints the report; the other ranks' output goes to a log shown on failure.
 # Usage: bash scripts/test.sh [pytest arguments]
 set -euo pipefail
-source "$(dirname "${BASH_SOURCE[0]}")/bootstrap.sh"
+# chromium: the tests render the report in a browser (the main job needs none)
+PETGAP_EXTRA_PACKAGES="chromium ${PETGAP_EXTRA_PACKAGES:-}" \
+  source "$(dirname "${BASH_SOURCE[0]}")/bootstrap.sh"
 cd "$PETGAP_ROOT"
 log=$(mktemp -d)/rank-logs
 mkdir -p "$log"

@@ -53,3 +53,42 @@ def test_surface_topography_leaves_debians_numpy_and_mpi_h5py():
         except importlib.metadata.PackageNotFoundError:
             continue
         assert ".venv" not in location.parts, f"a pip {name} in the venv: {location}"
+
+
+def _set_up_packages(tmp_path, script):
+    """The Debian packages ``scripts/<script>`` would install on a machine that has none:
+    the scripts run from a copy of ``scripts/`` with ``dpkg-query`` saying nothing is
+    installed and ``apt-get``, ``mpirun`` and ``timeout`` stubbed (the venv is this one)."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+    from conftest import clean_env
+    root, fake = tmp_path / "clone", tmp_path / "bin"
+    shutil.copytree(ROOT / "scripts", root / "scripts")
+    fake.mkdir()
+    calls = tmp_path / "apt-get.txt"
+    stubs = {"dpkg-query": "exit 1", "apt-get": f'echo "$@" >> "{calls}"',
+             "sudo": 'exec "$@"', "timeout": "exit 0",
+             "mpirun": 'mkdir -p out/default-post'}
+    for name, body in stubs.items():
+        (fake / name).write_text(f"#!/bin/sh\n{body}\n")
+        (fake / name).chmod(0o755)
+    # without this job's MPI variables: the set-up imports petgap, which starts MPI
+    env = clean_env({"PATH": f"{fake}:{os.environ['PATH']}",
+                     "PETGAP_VENV": str(Path(sys.executable).parents[1])})
+    env.pop("PETGAP_EXTRA_PACKAGES", None)
+    proc = subprocess.run(["bash", str(root / "scripts" / script)], env=env, cwd=root,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    installs = [line.split() for line in calls.read_text().splitlines() if "install" in line]
+    return {p for line in installs for p in line if not p.startswith("-")} - {"install"}
+
+
+def test_the_main_job_installs_no_browser_and_the_tests_do(tmp_path):
+    """Only the tests render the report in a browser: main.sh's set-up leaves chromium out,
+    test.sh's brings it (with everything main.sh installs)."""
+    main = _set_up_packages(tmp_path / "main", "main.sh")
+    tests = _set_up_packages(tmp_path / "tests", "test.sh")
+    assert "python3-petsc4py" in main and "chromium" not in main
+    assert "chromium" in tests and main <= tests

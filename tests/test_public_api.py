@@ -150,3 +150,15 @@ def test_citation_matches_the_version():
     text = (ROOT / "CITATION.cff").read_text()
     assert re.search(rf"^version: {re.escape(petgap.__version__)}$", text, flags=re.MULTILINE)
     assert "doi: 10.1007/s11249-021-01454-6" in text
+
+
+def test_help_of_solve_lists_every_control_of_the_registry():
+    """help(petgap.solve) names every control the registry solves, and where."""
+    from petgap.io.solver_registry import CONTROLS
+    from petgap.mechanics.problem import CONTROL_TYPES
+    text = pydoc.render_doc(petgap.solve, renderer=pydoc.plaintext)
+    assert set(CONTROL_TYPES) == set(CONTROLS)
+    for kind in CONTROLS:
+        assert f"{CONTROL_TYPES[kind].__name__}(" in text, kind
+    assert "Indentation(depth)" in text and "Solved on a free boundary with the hard wall." \
+        in " ".join(text.split())

@@ -103,15 +103,34 @@ def load_scene(path, comm=None):
     return Scene.from_file(path, comm, read_header=map_header)
 
 
+def fft_planner(scene, steps=None):
+    """The FFTW planner effort of a scene's grids, and why: ``(planner, reason)``.
+
+    ``solver.planner = "auto"`` chooses by the work ahead: a run of one solve
+    (``steps``, default the scene's planned steps) takes ``estimate``, which plans at
+    once, since ``measure`` times candidate plans for longer than faster transforms
+    save over a few dozen of them; a sweep takes ``measure``, whose plans each step
+    reuses and which later runs of the size read from the wisdom cache.
+    """
+    asked = scene.solver.planner
+    if asked != "auto":
+        return asked, "solver.planner"
+    count = len(protocol.plan(scene) if steps is None else steps)
+    if count > 1:
+        return "measure", f"auto: {count} solves ahead, plans kept as wisdom"
+    return "estimate", "auto: one solve ahead; solver.planner = \"measure\" for faster transforms"
+
+
 def make_grid(scene, comm, precision="double", planner=None):
     """The :class:`~petgap.parallel.grid.Grid` of a scene on ``comm``.
 
     ``precision`` of its fields (see :func:`build` for when a scene's grid is
-    single); ``planner`` overrides the scene's FFTW planner effort.
+    single); ``planner`` overrides the scene's FFTW planner effort
+    (:func:`fft_planner`).
     """
     g = scene.grid
     return Grid((g.nx, g.ny), size=g.size, comm=comm,
-                planner=scene.solver.planner if planner is None else planner,
+                planner=fft_planner(scene)[0] if planner is None else planner,
                 precision=precision)
 
 
@@ -523,11 +542,13 @@ def build(scene, comm=None, *, petsc_args=(), surface=None, resolution_check=Non
             gc.collect()  # (the grid's plans and buffers may sit in a reference cycle)
             topography = heights.astype(np.float32)
             del heights
-        with _timed(log, f"planning FFTs ({scene.solver.planner}, single precision)"):
-            grid = make_grid(scene, comm, precision="single")
+        planner, why = fft_planner(scene, steps)
+        with _timed(log, f"planning FFTs ({planner}, single precision; {why})"):
+            grid = make_grid(scene, comm, precision="single", planner=planner)
     else:
-        with _timed(log, f"planning FFTs ({scene.solver.planner})"):
-            grid = make_grid(scene, comm)
+        planner, why = fft_planner(scene, steps)
+        with _timed(log, f"planning FFTs ({planner}; {why})"):
+            grid = make_grid(scene, comm, planner=planner)
         with _timed(log, "making the surface"):
             topography = surface(grid) if surface is not None else make_surface(scene, grid)
     args = list(scene.solver.petsc_args()) + list(petsc_args)

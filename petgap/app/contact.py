@@ -22,6 +22,7 @@ solution) build the objects themselves: :class:`~petgap.parallel.grid.Grid`,
 """
 import math
 import numbers
+import os
 import zlib
 from dataclasses import dataclass, field
 
@@ -36,7 +37,10 @@ from petgap.mechanics import plausibility
 from petgap.mechanics.interactions import LAWS
 from petgap.mechanics.interactions.resolution import resolution_report
 from petgap.parallel import Grid
+from petgap.parallel.collective import root_decides
+from petgap.parallel.log import configured
 from petgap.solvers import solve
+from petgap.surfaces.topography import read_map
 
 #: What :func:`contact` can return as fields.
 FIELDS = ("global", "local")
@@ -79,6 +83,10 @@ class ContactResult:
         The problem solved, with its grid (for further analysis or solves).
     statistics : petgap.analysis.ContactStatistics
         The contact statistics the scalars above come from.
+    periodic : bool
+        Whether the map was solved as a periodic cell (else on a free boundary).
+    unit : str or None
+        The length unit of a topography or file (None for an array).
     """
 
     gap: np.ndarray = field(repr=False)
@@ -103,6 +111,8 @@ class ContactResult:
     solution: object = field(repr=False)
     problem: object = field(repr=False)
     statistics: object = field(repr=False)
+    periodic: bool = True
+    unit: str = None
 
     def scalars(self):
         """The scalars as a flat dict (the same on every rank)."""
@@ -112,23 +122,32 @@ class ContactResult:
             "rms_height", "rms_slope", "attractive_force", "repulsive_force")}
 
 
-def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.0,
+def contact(heights, pixel_size=None, *, load=None, mean_gap=None, contact_modulus=1.0,
             interaction=None, work_of_adhesion=None, interaction_range=None, comm=None,
             fields="global", tolerance=1e-8, solver="pcg", max_iterations=10000,
-            options=None, planner="estimate", periodic=True):
+            options=None, planner="estimate", periodic=None, unit=None):
     """Solve the contact of a rigid rough surface on an elastic half-space in one call.
 
-    Collective on ``comm``: every rank calls it with the same arguments.
+    Collective on ``comm``: every rank calls it with the same arguments.  A solve that
+    runs for more than a few seconds logs its progress and its verdict on rank 0
+    (through the ``petgap`` logger, which is set up to show them if nothing else
+    shows it: :func:`petgap.parallel.log.configured`).
 
     Parameters
     ----------
-    heights : array_like, shape ``(nx, ny)``
-        The global height map ``h`` (axis 0 along x), finite, **the same array
-        on every rank**; each rank keeps only its rows of it.  Contact occurs at
-        the maxima of ``h``.
-    pixel_size : float or (float, float)
-        ``a0``, or ``(dx, dy)``; positive.  The cell is ``nx dx x ny dy``,
-        periodic unless ``periodic`` is False.
+    heights : array_like, SurfaceTopography topography, or path
+        The global height map ``h`` (axis 0 along x), finite, **the same on every
+        rank**; each rank keeps only its rows of it.  Contact occurs at the maxima
+        of ``h``.  A topography of SurfaceTopography (``read_topography(path)``) or a path to a file petgap or SurfaceTopography reads
+        (rank 0 reads it, :func:`petgap.surfaces.topography.read_map`) brings its
+        pixel size, its unit and whether it is periodic.
+    pixel_size : float or (float, float), optional
+        ``a0``, or ``(dx, dy)``; positive.  The cell is ``nx dx x ny dy``.  Default:
+        a topography's or file's physical size over its pixels, else unit pixels.
+    unit : str, optional
+        A topography's or file's lengths (heights and pixel size) converted to this
+        unit (``"nm"``, ``"um"``, ...); default the file's own.  Pressures stay in
+        the unit of ``contact_modulus``.
     load, mean_gap : float
         Exactly one: the mean pressure ``P0`` (positive in compression; ``>= 0``
         for the hard wall, any sign with adhesion) or the mean gap (``> 0``).
@@ -155,11 +174,13 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
         FFTW planner effort of the grid.  ``"estimate"`` plans at once;
         ``"measure"`` plans faster transforms for large or repeated solves and
         caches the wisdom on disk (see :class:`~petgap.parallel.grid.Grid`).
-    periodic : bool
-        Solve the map as a periodic cell (default) or on a free boundary: the map
-        alone on an infinite half-space
-        (:class:`~petgap.mechanics.free_half_space.FreeHalfSpace`), as for a
-        measured map whose edges do not match.
+    periodic : bool, optional
+        Solve the map as a periodic cell or on a free boundary: the map alone on an
+        infinite half-space (:class:`~petgap.mechanics.free_half_space.FreeHalfSpace`).
+        The rule ``petgap run`` follows: a measured map (a topography or a file) is
+        free unless it says it is periodic (``is_periodic``); an array is a cell the
+        caller made (a :func:`petgap.self_affine` surface), periodic unless this says
+        otherwise.
 
     Returns
     -------
@@ -188,6 +209,9 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
         r.contact_fraction, r.mean_gap, r.converged
     """
     comm = MPI.COMM_WORLD if comm is None else comm
+    configured(comm)
+    heights, pixel_size, periodic, length_unit = measured_map(heights, pixel_size, periodic,
+                                                              unit, comm)
     heights, (dx, dy), control, contact_modulus, interaction = _agreed(comm, lambda: _check(
         heights, pixel_size, load, mean_gap, contact_modulus, interaction, work_of_adhesion,
         interaction_range, fields, solver, periodic))
@@ -216,7 +240,44 @@ def contact(heights, pixel_size, *, load=None, mean_gap=None, contact_modulus=1.
         perimeter=stats.perimeter, mean_diameter=stats.mean_diameter, g0=stats.g0,
         rms_height=problem.rms_height, rms_slope=problem.rms_slope,
         attractive_force=solution.attractive_force, repulsive_force=solution.repulsive_force,
-        solution=solution, problem=problem, statistics=stats)
+        solution=solution, problem=problem, statistics=stats, periodic=periodic,
+        unit=length_unit)
+
+
+def measured_map(heights, pixel_size, periodic, unit, comm):
+    """``(array, pixel_size, periodic, unit)`` of what :func:`contact` was given.
+
+    An array is taken as it is (unit pixels, periodic unless ``periodic`` says
+    otherwise, no unit); a SurfaceTopography topography or a file (read on rank 0,
+    the result and any error shared by every rank) brings its heights, pixel size,
+    unit and periodicity, converted to ``unit`` if given, which ``pixel_size`` and
+    ``periodic`` override.
+    """
+    if isinstance(heights, (str, os.PathLike)):
+        path = heights
+        found = root_decides(comm, lambda: read_map(path, unit=unit))
+        heights, size, file_unit, says = (found.heights, found.physical_size, found.unit,
+                                          found.periodic)
+    elif hasattr(heights, "heights") and hasattr(heights, "physical_sizes"):
+        topography = heights
+        if unit is not None and topography.unit is not None and unit != topography.unit:
+            topography = topography.to_unit(unit)
+        if topography.has_undefined_data:
+            raise ValueError("heights: the topography has undefined points (NaN or masked); "
+                             "fill them first (its interpolate_undefined_data(\"harmonic\"))")
+        heights, size = np.ma.getdata(topography.heights()), topography.physical_sizes
+        file_unit, says = topography.unit, bool(topography.is_periodic)
+    else:
+        if unit is not None:
+            raise ValueError(f"unit = {unit!r} is given for an array, which has no unit to "
+                             f"convert from; pass a topography or a file, or scale the array")
+        return heights, 1.0 if pixel_size is None else pixel_size, \
+            True if periodic is None else periodic, None
+    if pixel_size is None and size is not None:
+        shape = np.shape(heights)
+        pixel_size = (float(size[0]) / shape[0], float(size[1]) / shape[1])
+    return (heights, 1.0 if pixel_size is None else pixel_size,
+            says if periodic is None else periodic, unit or file_unit)
 
 
 # ------------------------------------------------------------------ checks

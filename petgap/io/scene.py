@@ -844,8 +844,10 @@ class SolverSection:
                            "mean-constraint residual / h0)")
     max_iterations: int = key(Int(minimum=1), 10000, "iteration limit per sweep step")
     petsc_options: tuple = key(OptionTable(), (), "extra PETSc options database entries")
-    planner: str = key(Choice("estimate", "measure", "patient"), "measure",
-                       "FFTW planner effort (plans are cached as wisdom on disk)")
+    planner: str = key(Choice("auto", "estimate", "measure", "patient"), "auto",
+                       "FFTW planner effort (measured plans are cached as wisdom on disk); "
+                       "auto: estimate for a run of one solve, whose planning would cost "
+                       "more than faster transforms save, measure for a sweep")
     precision: str = key(Choice(*registry.PRECISIONS), "double",
                          "floating point of the solve: double; single (fields and transforms "
                          "in 32 bits, sums in 64; half the memory, tolerance at least "

@@ -93,6 +93,11 @@ class Indentation:
         return self.depth
 
 
+#: The control types by their ``kind`` (the words of the registry of solvers,
+#: :data:`petgap.io.solver_registry.CONTROLS`, and of a scene's ``control.kind``).
+CONTROL_TYPES = {control.kind: control for control in (Load, MeanGap, Indentation)}
+
+
 @dataclass
 class ContactSolution:
     """A solved (or not) contact state and how it was reached.
@@ -121,7 +126,12 @@ class ContactSolution:
     point the solve ran in: ``"double"``, ``"single"`` (the grid's; the fields are
     then 32-bit) or ``"mixed"`` (single, refined in double).  ``operator_applications``
     counts the elastic operator's applications in transform pairs (a step length
-    that needs only the forward half of one counts a half).
+    that needs only the forward half of one counts a half).  ``approach`` is, on a
+    free boundary, how far the rigid body has moved past first contact with the
+    highest point, ``max(h) - d`` for ``g = d + u - h``: the depth of an
+    :class:`Indentation`, and what a load or a mean gap pressed it to (negative when
+    adhesion holds the surfaces together apart); NaN on a periodic cell, whose
+    displacement has no mean and so no rigid-body position.
     """
 
     gap: np.ndarray
@@ -153,6 +163,7 @@ class ContactSolution:
     start: str = ""
     start_time: float = 0.0
     precision: str = "double"
+    approach: float = float("nan")
 
     def scalars(self):
         """The scalar results as a flat dict (for HDF5 attributes and tables)."""
@@ -162,7 +173,7 @@ class ContactSolution:
             "attractive_force", "attractive_fraction", "inv_kappa_att", "kkt_pressure",
             "kkt_gap", "converged", "reason", "solver", "iterations", "operator_applications",
             "wall_time", "direction", "jump", "negative_curvature_steps", "start",
-            "start_time", "precision")}
+            "start_time", "precision", "approach")}
         out["control"] = self.control.kind
         out["control_value"] = self.control.value
         return out
@@ -330,7 +341,7 @@ class ContactProblem:
 
     def make_solution(self, gap, pressure, contact, control, *, converged, reason, solver,
                       iterations, operator_applications, wall_time, history=(), residuals=None,
-                      start="", start_time=0.0):
+                      start="", start_time=0.0, approach=float("nan")):
         """Assemble a :class:`ContactSolution` with all derived quantities.
 
         ``residuals`` overrides the KKT residuals computed from ``gap`` and
@@ -391,7 +402,7 @@ class ContactProblem:
             solver=solver, iterations=int(iterations),
             operator_applications=float(operator_applications), wall_time=float(wall_time),
             history=list(history), start=str(start), start_time=float(start_time),
-            precision=grid.precision)
+            precision=grid.precision, approach=float(approach))
 
 
 def _max_or_zero(values):

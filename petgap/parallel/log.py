@@ -119,6 +119,19 @@ def configure(comm=None, quiet=False, stdout=None, stderr=None):
     return logger
 
 
+def configured(comm=None):
+    """The ``petgap`` logger, set up by :func:`configure` unless a handler already shows it.
+
+    For library calls that run long (:func:`petgap.contact`): a script that never set up
+    logging still sees their progress on rank 0, and one that did keeps its own set-up
+    (handlers of the ``petgap`` logger, or of the root logger it propagates to).
+    """
+    logger = logging.getLogger(LOGGER_NAME)
+    if logger.handlers or logging.getLogger().handlers:
+        return logger
+    return configure(comm)
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None):
     kind = "" if category is UserWarning else f"{category.__name__}: "
     logging.getLogger(LOGGER_NAME).warning("%s%s", kind, message)

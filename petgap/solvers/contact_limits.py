@@ -72,4 +72,5 @@ def touching_state(problem, control, timer=None):
     return problem.make_solution(gap, pressure, pressure > 0, control, converged=True,
                                  reason="zero_load", solver="pcg-pressure", iterations=0,
                                  operator_applications=0,
-                                 wall_time=timer() if timer is not None else 0.0)
+                                 wall_time=timer() if timer is not None else 0.0,
+                                 approach=float("nan") if problem.half_space.periodic else 0.0)

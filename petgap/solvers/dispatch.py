@@ -61,14 +61,18 @@ over ``h0' E*`` and gap violation over ``h0`` below ``tolerance``), never on
 TAO's unit-dependent gradient norms, and reports ``converged=False`` with
 TAO's reason when it stops for any other cause.
 """
+import dataclasses
+import textwrap
+
 from petsc4py import PETSc
 
 from petgap.io import solver_registry as registry
-from petgap.mechanics.problem import Load
+from petgap.mechanics.problem import CONTROL_TYPES, Load
 from petgap.solvers.free_boundary import PaddedCell
 from petgap.solvers.mixed_precision import solve_mixed
 from petgap.solvers.contact_limits import FullContact, touching_state
 from petgap.solvers.indentation import solve_mean_gap_by_indentation
+from petgap.solvers.progress import SolveProgress
 from petgap.solvers.settings import read_settings
 from petgap.solvers.control_loops import solve_as
 
@@ -81,18 +85,23 @@ PADDED_CELL = PaddedCell()
 FULL_CONTACT = FullContact()
 
 
-def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=10000,
+def solve(problem, control, *, solver="pcg", tolerance=None, max_iterations=10000,
           initial=None, options=None, monitor=None, precision=None):
     """Solve one contact problem.
 
     Parameters
     ----------
     problem : petgap.mechanics.problem.ContactProblem
-    control : petgap.mechanics.problem.Load, MeanGap or Indentation
+    control : one of the controls below
+        What is imposed.
     solver : str
         One of :data:`SOLVER_TYPES`; ``-tao_type`` in the options overrides it.
-    tolerance : float
-        Unit-free KKT tolerance.
+    tolerance : float, optional
+        Unit-free KKT tolerance; default 1e-8, or in single precision its floor
+        (:data:`petgap.io.solver_registry.SINGLE_TOLERANCE_FLOOR`).  A tolerance below
+        that floor on a single-precision grid is refused up front: 32-bit rounding of
+        the displacement decides the contact edge there, and the solve would only
+        stall (``precision="mixed"`` refines in double to any tolerance).
     max_iterations : int
         Iteration limit of the whole solve, summed over the inner solves of the
         outer loops (adhesive load control, mean-gap control with TAO
@@ -103,7 +112,9 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
     options : dict, optional
         PETSc options (without the leading dash) set for this solve only.
     monitor : callable, optional
-        ``monitor(iteration, residual)``, called on every rank.
+        ``monitor(iteration, residual)``, called on every rank.  Without one a solve
+        that runs for more than a few seconds logs its progress and its verdict
+        (:class:`petgap.solvers.progress.SolveProgress`, the ``petgap`` logger at INFO).
     precision : {"double", "single", "mixed"}, optional
         Default: the grid's (``"double"`` or ``"single"``).  ``"mixed"`` needs a
         double problem (see "Precision" above).
@@ -111,13 +122,49 @@ def solve(problem, control, *, solver="pcg", tolerance=1e-8, max_iterations=1000
     Returns
     -------
     petgap.mechanics.problem.ContactSolution
+
+    Controls
+    --------
+    {controls}
     """
     # The options stay in force through the solve: TAO reads some of them there
     # (-tao_view, -tao_converged_reason), not in setFromOptions.
     with petsc_options(options):
         settings = read_settings(problem.grid.precision, solver=solver, tolerance=tolerance,
                                  max_iterations=max_iterations, precision=precision)
-        return run(problem, control, settings, initial=initial, monitor=monitor)
+        if monitor is not None:
+            return run(problem, control, settings, initial=initial, monitor=monitor)
+        progress = SolveProgress(settings.tolerance)
+        solution = run(problem, control, settings, initial=initial, monitor=progress)
+        progress.verdict(solution)
+        return solution
+
+
+def controls_help(indent="    "):
+    """The controls :func:`solve` takes, one paragraph each: the registry's
+    (:data:`~petgap.io.solver_registry.CONTROLS`), with where the registry solves each
+    (boundary, interaction), so that the list cannot fall behind it."""
+    paragraphs = []
+    for kind in registry.CONTROLS:
+        control = CONTROL_TYPES[kind]
+        where = [f"{registry.api_name('boundary', periodic)} with "
+                 + " or ".join(registry.api_name("interaction", adhesive)
+                               for adhesive in (False, True)
+                               if registry.refusal(registry.Case(
+                                   solver="pcg", control=kind, adhesive=adhesive,
+                                   periodic=periodic)) is None)
+                 for periodic in (True, False)]
+        fields = ", ".join(f.name for f in dataclasses.fields(control))
+        summary = control.__doc__.split("\n")[0] if control.__doc__ else ""
+        solved = "; ".join(w for w in where if not w.endswith(" with "))
+        text = textwrap.fill(f"{summary}  Solved on {solved}.", 80,
+                             initial_indent=indent + "    ", subsequent_indent=indent + "    ")
+        paragraphs.append(f"``{control.__name__}({fields})``\n{text}")
+    return f"\n{indent}".join(paragraphs)
+
+
+if solve.__doc__:   # (python -OO strips docstrings)
+    solve.__doc__ = solve.__doc__.replace("{controls}", controls_help())
 
 
 def case_of(problem, control, settings):
@@ -125,7 +172,8 @@ def case_of(problem, control, settings):
     return registry.Case(
         solver=settings.solver, adhesive=problem.interaction.adhesive,
         periodic=problem.half_space.periodic, precision=settings.precision,
-        grid=problem.grid.precision, **registry.control_words(control))
+        grid=problem.grid.precision, tolerance=settings.tolerance,
+        **registry.control_words(control))
 
 
 def run(problem, control, settings, *, initial=None, monitor=None):

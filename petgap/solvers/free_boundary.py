@@ -42,6 +42,7 @@ from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.collective import move_rows
 from petgap.solvers.convergence import Timer
 from petgap.solvers.control_loops import solve_as
+from petgap.solvers.progress import outer_step
 
 #: Interaction length scales between the cell's surface outside the map and the map's
 #: lowest point: the gap outside stays above this many of them.
@@ -165,6 +166,7 @@ class PaddedCell:
         previous, solves, iterations, history = None, 0, 0, []
         converged, reason = False, "max_solves"
         inner = _step_tolerance(settings.tolerance, None)
+        timer = Timer()
         while solves < self.max_solves:
             solution = solve_as(on_cell, MeanGap(guess), kind, settings.but(tolerance=inner),
                                 warm, monitor)
@@ -173,6 +175,10 @@ class PaddedCell:
             history.extend(solution.history)
             gap = _to_map(grid, cell, solution.gap)
             mean = grid.comm.allreduce(float(gap.sum())) / grid.npoints
+            outer_step("the map's mean gap on its padded cell", solves, self.max_solves, timer,
+                       f"mean gap off by {abs(mean - target) / problem.gap_scale:.3e} h0 "
+                       f"(target {settings.tolerance:.0e}) after {solution.iterations} "
+                       f"iterations to {inner:.0e}")
             if not solution.converged:
                 reason = solution.reason
                 break
@@ -199,8 +205,12 @@ class PaddedCell:
         start = "; ".join(filter(None, [f"solved on the {cell.nx}x{cell.ny} padded cell"
                                         + (f" ({solves} mean-gap solves)" if solves > 1 else ""),
                                         solution.start]))
+        # the rigid body's position d of g = d + u - h, with the map's own u = C p (the
+        # cell's displacement lacks the mean its periodic q = 0 mode leaves to the control)
+        offset = gap + problem.topography - problem.half_space.displacement(pressure)
+        approach = problem.top_height - grid.comm.allreduce(float(offset.sum())) / grid.npoints
         return problem.make_solution(
             gap, pressure, gap <= 0, control, solver=solution.solver,
             operator_applications=problem.operator_applications
             + on_cell.operator_applications - start_ops, wall_time=timer(), start=start,
-            start_time=solution.start_time, **verdict)
+            start_time=solution.start_time, approach=approach, **verdict)

@@ -9,6 +9,7 @@ own, so the mean gap is reached as the depth of an
 from petgap.mechanics.problem import Indentation
 from petgap.solvers.contact_limits import touching_state
 from petgap.solvers.convergence import Timer
+from petgap.solvers.progress import outer_step
 from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.solvers.settings import SolverSettings
 
@@ -40,6 +41,7 @@ def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *
         state = touching_state(problem, control, timer)
         state.gap += g_bar - reach
         state.mean_gap = g_bar
+        state.approach = reach - g_bar
         return state
     start_ops = problem.operator_applications
     depth, previous = reach - g_bar, None
@@ -53,6 +55,9 @@ def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *
         iterations += solution.iterations
         history.extend(solution.history)
         excess = solution.mean_gap - g_bar
+        outer_step("the mean gap by the indentation", solves, max_solves, timer,
+                   f"mean gap off by {abs(excess) / problem.gap_scale:.3e} h0 (target "
+                   f"{tolerance:.0e}) after {solution.iterations} iterations")
         if not solution.converged:
             reason = solution.reason
             break

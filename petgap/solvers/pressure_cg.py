@@ -444,4 +444,7 @@ class PressureCG:
             g, p, contact, control, converged=self.converged, reason=self.reason,
             solver="pcg-pressure", iterations=self.it, wall_time=timer(), history=self.history,
             operator_applications=problem.operator_applications - start_ops,
-            residuals=(0.0, residual / problem.gap_scale), start=start, start_time=start_time)
+            residuals=(0.0, residual / problem.gap_scale), start=start, start_time=start_time,
+            # g = u - h + d with u = C p: on a free boundary d is the rigid body's position
+            approach=(float("nan") if problem.half_space.periodic
+                      else problem.top_height - (self.offset - self.shift)))

@@ -13,7 +13,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from petsc4py import PETSc
 
-from petgap.io.solver_registry import ALIASES, PRECISIONS, SOLVER_NAMES, choice_refusal
+from petgap.io.solver_registry import (ALIASES, PRECISIONS, SINGLE_TOLERANCE_FLOOR, SOLVER_NAMES,
+                                        choice_refusal)
 from petgap.solvers.coarse import COARSE_TOLERANCE
 from petgap.solvers.edge_correction import EDGE_CORRECTION
 from petgap.solvers.patch_interaction import BLOCK
@@ -129,7 +130,11 @@ PETGAP_OPTIONS = {"petgap_coarse_start": ("coarse_start", "bool"),
                   "petgap_two_level": ("two_level", "bool")}
 
 
-def read_settings(grid_precision, *, solver="pcg", tolerance=1e-8, max_iterations=10000,
+#: The tolerance of a solve that names none; single precision stops at its floor instead.
+DEFAULT_TOLERANCE = 1e-8
+
+
+def read_settings(grid_precision, *, solver="pcg", tolerance=None, max_iterations=10000,
                   precision=None):
     """The settings of one solve: the keywords of :func:`petgap.solve` and PETSc's options.
 
@@ -138,8 +143,11 @@ def read_settings(grid_precision, *, solver="pcg", tolerance=1e-8, max_iteration
     the last word on the solver (TAO's ``python`` is ``pcg``), ``-petgap_*`` set the
     fields of :data:`PETGAP_OPTIONS`.  ``precision`` defaults to the grid's
     (``grid_precision``); a mixed solve finds its steps in single precision unless
-    ``-petgap_search_precision`` says otherwise.  Raises ValueError naming the
-    keyword or option and what is allowed.
+    ``-petgap_search_precision`` says otherwise.  ``tolerance`` defaults to
+    :data:`DEFAULT_TOLERANCE`, or in single precision to its floor
+    (:data:`~petgap.io.solver_registry.SINGLE_TOLERANCE_FLOOR`), below which a single
+    solve stalls on round-off: a tolerance asked for below it is the registry's to
+    refuse.  Raises ValueError naming the keyword or option and what is allowed.
     """
     refusal = choice_refusal("solver", solver, SOLVER_NAMES)
     if refusal is not None:
@@ -150,6 +158,8 @@ def read_settings(grid_precision, *, solver="pcg", tolerance=1e-8, max_iteration
     if refusal is not None:
         raise ValueError(refusal.message())
     precision = grid_precision if precision is None else precision
+    if tolerance is None:
+        tolerance = SINGLE_TOLERANCE_FLOOR if precision == "single" else DEFAULT_TOLERANCE
     defaults = SolverSettings(search_precision="single" if precision == "mixed" else "double")
     read = {"bool": db.getBool, "real": db.getReal, "int": db.getInt,
             "precision": db.getString}

@@ -9,7 +9,7 @@ import math
 from collections.abc import Hashable
 from dataclasses import dataclass
 
-from petgap.mechanics.problem import Load
+from petgap.mechanics.problem import MeanGap
 from petgap.solvers.dispatch import solve
 
 
@@ -59,7 +59,7 @@ def sweep(problem, steps, *, initial=None, before=None, **solve_options):
     it before the next step starts.  Each state gets
 
     * ``direction``: ``"loading"`` when the control pushes the surfaces together
-      (larger load, smaller mean gap) relative to the previous step,
+      (larger load, deeper indentation, smaller mean gap) relative to the previous step,
       ``"unloading"`` when it pulls them apart, ``"start"`` for the first;
     * ``jump``: True when the area at zero gap (``zero_gap_fraction``: repulsive
       and tensile contact alike) changed faster (per unit control) than 3 times
@@ -129,7 +129,8 @@ def annotate_step(solution, previous, last_rate):
     if previous is None or previous.control.kind != solution.control.kind:
         return None
     change = solution.control.value - previous.control.value
-    pushes = change > 0 if isinstance(solution.control, Load) else change < 0
+    # a mean gap pushes by shrinking; a load and an indentation by growing
+    pushes = change < 0 if isinstance(solution.control, MeanGap) else change > 0
     solution.direction = "loading" if pushes else "unloading"
     if solution.zero_gap_fraction is None or previous.zero_gap_fraction is None:
         return None

@@ -21,6 +21,9 @@ Modules
 :mod:`.topography`
     :func:`load_topography` reads a global ``.npy`` or HDF5 array straight into
     each rank's slab; :func:`save_topography_npy` writes one.
+:mod:`.measured`
+    :func:`read_measured` reads an instrument's file with SurfaceTopography, with its
+    physical size, unit and periodicity (:class:`Measurement`).
 
 The generator and the statistics are imported from their modules
 (``from petgap.surfaces.self_affine import self_affine``,
@@ -30,7 +33,8 @@ and ``petgap.surfaces.statistics`` stay the modules.
 """
 from petgap.surfaces.self_affine import psd_shape
 from petgap.surfaces.statistics import SurfaceStatistics, radial_psd
+from petgap.surfaces.measured import Measurement, read_measured
 from petgap.surfaces.topography import load_topography, save_topography_npy
 
 __all__ = ["SurfaceStatistics", "psd_shape", "radial_psd", "load_topography",
-           "save_topography_npy"]
+           "save_topography_npy", "read_measured", "Measurement"]

@@ -308,3 +308,21 @@ def test_a_series_of_works_runs_and_stores_each_w(comm, mpi_tmp_path):
     assert list(works[1:]) == [1e-4, 2e-4, 4e-4]
     assert gaps[1:] == pytest.approx([gaps[0]] * 3, rel=1e-7)
     assert pressures[0] > pressures[1] > pressures[2] > pressures[3]
+
+
+def test_fft_planner_by_the_work_ahead(comm):
+    """solver.planner = "auto" (the default): estimate for one solve, measure for a sweep,
+    saying why; a planner the scene names is kept."""
+    from petgap.app.build import fft_planner, make_grid
+    auto = {k: v for k, v in SCENE["solver"].items() if k != "planner"}
+    one = Scene.from_dict(dict(SCENE, solver=auto, control={"kind": "load", "values": [0.01]}),
+                          comm)
+    many = Scene.from_dict(dict(SCENE, solver=auto), comm)
+    named = Scene.from_dict(dict(SCENE, solver=dict(auto, planner="patient")), comm)
+    grid = make_grid(one, comm)
+    assert one.solver.planner == "auto"
+    assert fft_planner(one) == ("estimate", "auto: one solve ahead; solver.planner = "
+                                "\"measure\" for faster transforms")
+    assert fft_planner(many) == ("measure", "auto: 2 solves ahead, plans kept as wisdom")
+    assert fft_planner(named) == ("patient", "solver.planner")
+    assert grid.planner == "estimate"

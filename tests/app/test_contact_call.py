@@ -199,3 +199,102 @@ def test_bad_heights_on_one_rank_raise_on_every_rank(comm):
     loads = 0.005 * (1 + comm.rank)
     if comm.size > 1:
         assert "arguments differ between rank 0 and rank 1" in _error(comm, load=loads)
+
+
+# ------------------------------------------------ measured maps: one boundary rule
+TOP = __import__("pathlib").Path(__file__).resolve().parents[1] / "data" / "topographies" \
+    / "top-1.top"   # WSxM, 256 x 256 pixels over 600 x 600 nm, not periodic
+
+
+def test_a_measured_map_is_free_with_its_size_and_unit(comm):
+    """A file or a SurfaceTopography topography is solved as ``petgap run`` solves it: on a
+    free boundary (the file does not say it is periodic), with its pixel size and unit;
+    an array stays a periodic cell unless told otherwise."""
+    from petgap.surfaces.measured import surface_topography
+    measured = petgap.read_measured(TOP)
+    topography = surface_topography().read_topography(str(TOP))
+    load = 0.01 * 0.165
+    by_path = petgap.contact(TOP, load=load, comm=comm)
+    by_topography = petgap.contact(topography, load=load, comm=comm)
+    in_um = petgap.contact(topography, load=load, unit="um", comm=comm)
+    by_array = petgap.contact(measured.heights, 600 / 256, load=load, periodic=False, comm=comm)
+    as_cell = petgap.contact(measured.heights, 600 / 256, load=load, comm=comm)
+    assert measured.heights.shape == (256, 256) and measured.unit == "nm"
+    assert measured.physical_size == pytest.approx((600.0, 600.0)) and not measured.periodic
+    for r in (by_path, by_topography):
+        assert not r.periodic and r.unit == "nm" and r.converged
+        assert r.problem.grid.dx == pytest.approx(600 / 256)
+        assert r.contact_fraction == by_array.contact_fraction
+        assert r.mean_gap == pytest.approx(by_array.mean_gap, rel=1e-12)
+    assert in_um.unit == "um" and in_um.problem.grid.dx == pytest.approx(0.6 / 256)
+    assert in_um.mean_gap == pytest.approx(1e-3 * by_array.mean_gap, rel=1e-6)
+    assert as_cell.periodic and as_cell.unit is None
+    assert as_cell.contact_fraction != by_array.contact_fraction
+
+
+def test_a_measured_map_takes_the_users_word(comm):
+    """``periodic`` and ``pixel_size`` given override what the file says; a unit for a
+    bare array is refused, naming it."""
+    r = petgap.contact(TOP, 1.0, load=0.002, periodic=True, comm=comm)
+    with pytest.raises(ValueError, match="unit = 'nm' is given for an array"):
+        petgap.contact(np.ones((8, 8)), load=0.1, unit="nm", comm=comm)
+    assert r.periodic and r.problem.grid.dx == 1.0 and r.converged
+
+
+# ------------------------------------------------------------- no silent stalls
+class _Lines:
+    """The ``petgap`` logger's lines while it is in force (rank 0 logs INFO)."""
+
+    def __init__(self):
+        import logging
+        self.logger, self.lines = logging.getLogger("petgap"), []
+        self.handler = logging.Handler()
+        self.handler.emit = lambda record: self.lines.append(record.getMessage())
+
+    def __enter__(self):
+        self.level = self.logger.level
+        self.logger.addHandler(self.handler)
+        self.logger.setLevel("INFO")
+        return self.lines
+
+    def __exit__(self, *exc):
+        self.logger.removeHandler(self.handler)
+        self.logger.setLevel(self.level)
+
+
+def test_adhesive_free_load_reports_progress_and_ends_in_a_verdict(comm, monkeypatch, capfd):
+    """Adhesive load control on a free boundary: every outer step of the secant on the
+    mean gap is reported with its bound, the inner iterations with the residual against
+    the target and the time, and the solve ends in a verdict within its iteration limit:
+    converged, or -- with too few iterations -- max_iterations, said as a warning.
+    ``-petgap_coarse_start 0`` keeps the coarse ladder off; ``-tao_monitor`` prints."""
+    from petgap.solvers import progress
+    monkeypatch.setattr(progress, "PROGRESS_INTERVAL", 0.0)   # every iteration, for the test
+    grid = petgap.Grid((64, 64), comm=MPI.COMM_SELF, planner="estimate", wisdom=False)
+    h = petgap.self_affine(grid, 0.8, 8.0, 32.0, rms_slope=0.1, seed=1)
+    adhesion = dict(periodic=False, work_of_adhesion=0.05 * float(h.std()),
+                    interaction_range=1.0, load=0.002, comm=comm)
+    with _Lines() as lines:
+        done = petgap.contact(h, 1.0, max_iterations=2000, **adhesion)
+    said, lines[:] = list(lines), []
+    with _Lines() as lines:
+        cut = petgap.contact(h, 1.0, max_iterations=30, **adhesion)
+    cut_said, lines[:] = list(lines), []
+    with _Lines() as lines:
+        plain = petgap.contact(h, 1.0, max_iterations=2000, options={
+            "petgap_coarse_start": 0, "tao_monitor": None}, **adhesion)
+    printed = capfd.readouterr().out
+    assert done.converged and done.iterations <= 2000
+    assert plain.converged and plain.iterations <= 2000
+    if comm.rank == 0:
+        steps = [line for line in said if "adhesive load by the mean gap: step" in line]
+        assert steps and all("of at most 60" in line and "h0' E* (target 1e-08)" in line
+                             for line in steps)
+        assert any("iteration" in line and "(target 1e-08)" in line for line in said)
+        assert any(line.startswith("solve converged after") for line in said)
+        assert any("coarse grid" in line for line in said)
+        assert not any("coarse grid" in line for line in lines)
+        assert "TAO,  Function value" in printed
+    assert not cut.converged and cut.reason == "max_iterations" and cut.iterations <= 30
+    if comm.rank == 0:
+        assert any("NOT converged (max_iterations)" in line for line in cut_said)

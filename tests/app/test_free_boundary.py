@@ -149,3 +149,54 @@ def test_one_call_contact_on_a_free_boundary(comm):
     assert result.converged and result.contact_fraction == direct.contact_fraction
     np.testing.assert_allclose(result.pressure[grid.x_slice], direct.pressure, rtol=0,
                                atol=1e-12 * np.abs(direct.pressure).max())
+
+
+def test_free_solutions_report_their_approach(comm):
+    """A free boundary's load-controlled solution says how far the rigid body moved past
+    first contact, as an indentation does: the load of Indentation(d) gives back d, with
+    and without a vanishing adhesion; a periodic solution has no such position (NaN)."""
+    from petgap.mechanics import (ContactProblem, ExponentialAdhesion, FreeHalfSpace,
+                                  Indentation, Load)
+    from petgap.parallel import Grid
+    from petgap.solvers import solve
+    grid = Grid((64, 64), comm=comm, planner="estimate", wisdom=False)
+    h = indenters.indenter(grid, "paraboloid", 200.0)
+    problem = ContactProblem(grid, h, FreeHalfSpace(grid, 1.0))
+    pressed = solve(problem, Indentation(2.0))
+    loaded = solve(problem, Load(pressed.mean_pressure))
+    weak = problem.with_interaction(ExponentialAdhesion(1e-9, 0.5))
+    adhesive = solve(weak, Load(pressed.mean_pressure), tolerance=1e-7)
+    periodic = solve(ContactProblem(grid, h, None), Load(pressed.mean_pressure))
+    assert pressed.approach == pytest.approx(2.0, rel=1e-12)
+    assert pressed.scalars()["approach"] == pressed.approach
+    assert loaded.converged and loaded.approach == pytest.approx(2.0, rel=1e-6)
+    assert adhesive.converged and adhesive.approach == pytest.approx(2.0, rel=1e-4)
+    assert np.isnan(periodic.approach)
+
+
+def test_a_free_mean_gap_reports_its_outer_steps(comm):
+    """Mean-gap control on a free boundary is a loop of indentation solves: each step is
+    reported with the loop's bound and its residual against the target."""
+    import logging
+    from petgap.mechanics import ContactProblem, FreeHalfSpace, Indentation, MeanGap
+    from petgap.parallel import Grid
+    from petgap.solvers import solve
+    grid = Grid((64, 64), comm=comm, planner="estimate", wisdom=False)
+    problem = ContactProblem(grid, indenters.indenter(grid, "paraboloid", 200.0),
+                             FreeHalfSpace(grid, 1.0))
+    pressed = solve(problem, Indentation(2.0))
+    lines, logger = [], logging.getLogger("petgap")
+    handler, level = logging.Handler(), logger.level
+    handler.emit = lambda record: lines.append(record.getMessage())
+    logger.addHandler(handler)
+    logger.setLevel("INFO")
+    try:
+        solution = solve(problem, MeanGap(pressed.mean_gap))
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+    assert solution.converged and solution.approach == pytest.approx(2.0, rel=1e-6)
+    if comm.rank == 0:
+        steps = [line for line in lines if "the mean gap by the indentation: step" in line]
+        assert steps and all("of at most 50" in line and "h0 (target 1e-08)" in line
+                             for line in steps)

@@ -46,7 +46,7 @@ def test_defaults_and_derived_values(comm):
     assert scene.interaction.kind == "hard-wall" and scene.interaction.range is None
     assert scene.control.kind == "none" and scene.control.values is None
     assert scene.solver.tao_type == "pcg" and scene.solver.tolerance == 1e-8
-    assert scene.solver.planner == "measure" and scene.solver.petsc_options == ()
+    assert scene.solver.planner == "auto" and scene.solver.petsc_options == ()
     assert scene.output.fields == ("topography", "gap", "pressure") and scene.output.statistics
     assert scene.text == MINIMAL
     json.loads(scene.to_json())  # provenance is plain data

@@ -130,3 +130,11 @@ def test_refusals_name_what_is_not_solved(comm):
         solve(single, Load(0.004), solver="bncg", tolerance=1e-5)
     with pytest.raises(ValueError, match="precision 'half' is not one of"):
         solve(double, Load(0.004), precision="half")
+    # below single precision's floor: said up front, with the floor and what to do,
+    # not found out by a solve that stalls on round-off
+    with pytest.raises(ValueError, match=r"tolerance 1e-08 is below what single precision "
+                                         r"resolves.*>= 3e-06 .*\"mixed\""):
+        solve(single, Load(0.004), tolerance=1e-8)
+    # no tolerance given: the floor, reached
+    at_floor = solve(single, Load(0.004))
+    assert at_floor.converged and at_floor.kkt_gap <= SINGLE_TOLERANCE_FLOOR

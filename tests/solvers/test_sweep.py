@@ -100,3 +100,16 @@ def test_states_found_are_not_solved_again_but_annotated_and_chained(problem, ca
     assert calls[1] == (loads[2], None)
     assert cold[0].direction == "start" and cold[1].direction == "loading"
     assert cold[1].jump is False  # no zero-gap area to compare with
+
+
+def test_indentation_sweep_deeper_is_loading(comm):
+    """Deeper indentation pushes the surfaces together: loading; shallower: unloading."""
+    from petgap.mechanics.free_half_space import FreeHalfSpace
+    from petgap.mechanics.problem import Indentation
+    from petgap.surfaces.indenters import indenter
+    grid = Grid((64, 64), comm=comm, planner="estimate", wisdom=False)
+    problem = ContactProblem(grid, indenter(grid, "paraboloid", 200.0), FreeHalfSpace(grid, 1.0))
+    states = list(sweep(problem, [Indentation(1.0), Indentation(2.0), Indentation(1.5)],
+                        **OPTIONS))
+    assert [s.direction for s in states] == ["start", "loading", "unloading"]
+    assert all(s.converged for s in states)
