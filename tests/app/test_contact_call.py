@@ -263,10 +263,10 @@ class _Lines:
 
 
 def test_adhesive_free_load_reports_progress_and_ends_in_a_verdict(comm, monkeypatch, capfd):
-    """Adhesive load control on a free boundary: every outer step of the secant on the
-    mean gap is reported with its bound, the inner iterations with the residual against
-    the target and the time, and the solve ends in a verdict within its iteration limit:
-    converged, or -- with too few iterations -- max_iterations, said as a warning.
+    """Adhesive load control on a free boundary (one gap solve on the padded cell, from
+    the hard wall's state at the load): the iterations are reported with the residual
+    against the target and the time, and the solve ends in a verdict within its iteration
+    limit: converged, or -- with too few iterations -- max_iterations, said as a warning.
     ``-petgap_coarse_start 0`` keeps the coarse ladder off; ``-tao_monitor`` prints."""
     from petgap.solvers import progress
     monkeypatch.setattr(progress, "PROGRESS_INTERVAL", 0.0)   # every iteration, for the test
@@ -278,7 +278,7 @@ def test_adhesive_free_load_reports_progress_and_ends_in_a_verdict(comm, monkeyp
         done = petgap.contact(h, 1.0, max_iterations=2000, **adhesion)
     said, lines[:] = list(lines), []
     with _Lines() as lines:
-        cut = petgap.contact(h, 1.0, max_iterations=30, **adhesion)
+        cut = petgap.contact(h, 1.0, max_iterations=10, **adhesion)
     cut_said, lines[:] = list(lines), []
     with _Lines() as lines:
         plain = petgap.contact(h, 1.0, max_iterations=2000, options={
@@ -287,14 +287,11 @@ def test_adhesive_free_load_reports_progress_and_ends_in_a_verdict(comm, monkeyp
     assert done.converged and done.iterations <= 2000
     assert plain.converged and plain.iterations <= 2000
     if comm.rank == 0:
-        steps = [line for line in said if "adhesive load by the mean gap: step" in line]
-        assert steps and all("of at most 60" in line and "h0' E* (target 1e-08)" in line
-                             for line in steps)
         assert any("iteration" in line and "(target 1e-08)" in line for line in said)
         assert any(line.startswith("solve converged after") for line in said)
         assert any("coarse grid" in line for line in said)
         assert not any("coarse grid" in line for line in lines)
         assert "TAO,  Function value" in printed
-    assert not cut.converged and cut.reason == "max_iterations" and cut.iterations <= 30
+    assert not cut.converged and cut.reason == "max_iterations" and cut.iterations <= 10
     if comm.rank == 0:
         assert any("NOT converged (max_iterations)" in line for line in cut_said)
