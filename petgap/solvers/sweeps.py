@@ -8,6 +8,7 @@ hysteresis (snap-in, pull-off) is recorded rather than averaged away.
 import math
 from collections.abc import Hashable
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 from petgap.mechanics.problem import MeanGap
 from petgap.solvers.dispatch import solve
@@ -20,8 +21,10 @@ class SweepStep:
     Attributes
     ----------
     control : Load, MeanGap or callable
-        What is imposed; a callable ``control(states)`` gets the states of the
-        steps before this one (a list, in sweep order) and returns the control,
+        What is imposed; a callable ``control(states)`` gets the scalar results
+        of the steps before this one (a list, in sweep order, of objects with the
+        attributes of :meth:`~petgap.mechanics.problem.ContactSolution.scalars`:
+        ``mean_gap``, ``mean_pressure``, ...) and returns the control,
         for a value that only an earlier step can tell (the paper's protocol
         imposes on each adhesive step the mean gap of its non-adhesive
         reference step).
@@ -112,7 +115,10 @@ def sweep(problem, steps, *, initial=None, before=None, **solve_options):
                           initial=warm, **options)
         rates[chain] = annotate_step(state, last, rates.get(chain))
         previous[chain] = state
-        states.append(state)
+        # what a later step's control may ask of this one, without its fields: a long
+        # sweep holds one state per chain (the warm start), not a gap and a pressure per step
+        states.append(SimpleNamespace(**state.scalars()) if hasattr(state, "scalars")
+                      else state)
         yield state
 
 

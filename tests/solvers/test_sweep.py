@@ -64,6 +64,27 @@ def test_control_from_earlier_states(problem):
     assert second.direction == "start"
 
 
+def test_a_sweep_holds_no_fields_of_the_steps_behind_it(problem):
+    """A step's state lives on in the sweep only as its chain's warm start: once the
+    caller lets go of it and the chain has moved on, its gap and pressure are freed (a
+    protocol of many steps at 16384^2 cannot keep 16 bytes per point per step), while a
+    later step's control still reads its scalars."""
+    import gc  # deferred: this test only
+    import weakref
+    steps = [Load(0.002), Load(0.004), Load(0.003),
+             SweepStep(lambda states: MeanGap(states[0].mean_gap), chain="gap")]
+    alive, refs, scalars = [], [], []
+    for state in sweep(problem, steps, **OPTIONS):
+        gc.collect()
+        alive.append([ref() is not None for ref in refs])
+        refs.append(weakref.ref(state))
+        scalars.append((state.mean_gap, state.control))
+        del state
+    # each step's state is held only while it is its chain's warm start
+    assert alive == [[], [True], [False, True], [False, False, True]]
+    assert scalars[3][1] == MeanGap(scalars[0][0])
+
+
 def test_per_step_problem_and_before_hook(problem, comm):
     other = ContactProblem(problem.grid, 2.0 * problem.topography, problem.half_space)
     announced, monitored = [], []
