@@ -24,13 +24,21 @@ Conventions (those of :mod:`petgap.mechanics.half_space`)
 * ``u = C * p`` is a linear (not circular) convolution over the ``nx x ny``
   map, evaluated exactly by zero padding (Hockney 1970): ``p`` is embedded in a
   ``2 nx x 2 ny`` periodic cell whose kernel holds ``C`` at every offset the
-  map can see, ``|i| < nx`` and ``|j| < ny``; then one forward and one inverse
-  FFT-MPI transform of the padded cell, and a multiplication by the kernel's
-  transform (real: ``C`` is even in ``x`` and ``y``), give ``u`` on the map.
+  map can see, ``|i| < nx`` and ``|j| < ny``; then a forward and an inverse
+  transform of the padded cell, and a multiplication by the kernel's transform
+  (real: ``C`` is even in ``x`` and ``y``), give ``u`` on the map.
+* The kernel's transform is a 2D DCT-I of ``C`` at the offsets ``0 .. nx`` and
+  ``0 .. ny`` (the transform of an even sequence), unnormalised, the inverse's
+  ``1 / (4 nx ny)`` folded in (:func:`padded_symbol`).
 
-Cost: an application moves the map's rows to the padded cell's slabs and back
-(:func:`petgap.parallel.collective.move_rows`, one ``Alltoallv`` each way) and
-transforms four times as many points as the periodic operator on the map.
+Cost: the padded transform is pruned
+(:class:`petgap.parallel._fftw_mpi.PaddedConvolutionPlans`): the ``y``
+transforms, the transposes and the row passes see the map's ``nx`` rows only,
+in the map's own slab decomposition (no rows move to another), and only the
+``x`` transforms, in cache, span the cell.  ``(p, C p)`` comes from the forward
+half by Parseval (``p`` is zero outside the map), so that a conjugate-gradient
+step length pays for the inverse half only when it needs the field
+(:meth:`FreeHalfSpace.begin_sparse`).
 
 The stiffness ``K = C^{-1}`` has no such fast form.  The pressure solver needs
 ``K`` only as its preconditioner (an approximate inverse of ``C`` on the
@@ -47,9 +55,8 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.mechanics.half_space import ElasticHalfSpace
-from petgap.parallel.collective import move_rows
-from petgap.parallel.grid import Grid
-from petgap.parallel.log import OPERATOR_EVENT, event
+from petgap.parallel.grid import Grid, row_blocks
+from petgap.parallel.log import OPERATOR_EVENT, OPERATOR_HALF_EVENT, event
 
 
 def influence_coefficients(x, y, dx, dy, contact_modulus=1.0):
@@ -98,6 +105,47 @@ def padded_kernel(cell, contact_modulus):
     return kernel
 
 
+def _dct1(a):
+    """The DCT-I along the last axis, unnormalised: the transform of the even sequence
+    ``a[0], .., a[n], a[n-1], .., a[1]`` (real), at its ``n + 1`` distinct frequencies."""
+    even = np.concatenate([a, a[..., -2:0:-1]], axis=-1)
+    return np.fft.rfft(even, axis=-1).real
+
+
+def padded_symbol(grid, contact_modulus):
+    """The transform of ``C`` on the map's ``2 nx x 2 ny`` padded cell, on this rank's lines.
+
+    Returns ``(local_n1, nx + 1)`` doubles: line ``ky`` (the r2c half plane of the
+    cell's ``2 ny``, lines as :meth:`petgap.parallel.grid.Grid.zero_padded_plans`
+    splits them) at ``kx = 0 .. nx`` (even in ``kx``), unnormalised.  ``C`` is even in
+    ``x`` and ``y``, so its transform is a DCT-I along ``y`` of each row of offsets
+    ``0 .. ny``, then along ``x`` of offsets ``0 .. nx``; the map's rows are transposed
+    by double-precision plans whatever the grid's precision, and row ``nx``, which no
+    rank holds, is made by every rank.  Collective.
+    """
+    nx, ny, dx, dy = grid.nx, grid.ny, grid.dx, grid.dy
+    plans = grid.zero_padded_plans(planner="estimate", precision="double")
+    y = np.arange(ny + 1) * dy
+    i = np.arange(grid.x_slice.start, grid.x_slice.stop)
+    rows = plans.rows[:len(i) * (ny + 1)].reshape(len(i), ny + 1)
+    for block in row_blocks(len(i), ncols=ny + 1):
+        rows[block] = _dct1(influence_coefficients(i[block, None] * dx, y[None, :], dx, dy,
+                                                   contact_modulus))
+    plans.transpose()
+    lo, n1 = plans.local_1_start, plans.local_n1
+    lines = plans.lines[:n1 * nx].reshape(n1, nx)
+    last = _dct1(influence_coefficients(nx * dx, y, dx, dy, contact_modulus))[lo:lo + n1]
+    symbol = np.empty((n1, nx + 1))
+    for block in row_blocks(n1, ncols=2 * nx):
+        symbol[block] = _dct1(np.concatenate([lines[block].real, last[block, None]], axis=1))
+    return symbol
+
+
+def _indices(pidx):
+    """Flat padded-slab indices as the compiled plans take them (int32, no copy if so)."""
+    return np.asarray(pidx, dtype=np.int32)
+
+
 class FreeHalfSpace:
     """The infinite elastic half-space under pressures on a finite map.
 
@@ -121,24 +169,32 @@ class FreeHalfSpace:
 
     periodic = False
     #: ``C`` is applied in the map's precision (``apply_sparse``): a whole-slab result
-    #: stays in ``grid.real``, in double.
+    #: stays in ``grid.padded``, in the grid's precision.
     transforms_in_single = False
-    #: no ``begin_sparse``: a solver applies the operator whole (``apply_sparse``)
-    splits_transforms = False
+    #: ``begin_sparse`` gives ``(t, C t)`` from the forward half of the pruned transform
+    splits_transforms = True
 
     def __init__(self, grid, contact_modulus=1.0):
         self._periodic = ElasticHalfSpace(grid, contact_modulus)
         self.grid = grid
         self.contact_modulus = self._periodic.contact_modulus
-        nx, ny = grid.nx, grid.ny
-        self.cell = Grid((2 * nx, 2 * ny), size=(2 * grid.Lx, 2 * grid.Ly), comm=grid.comm,
-                         planner=grid.planner, wisdom=grid.wisdom)
-        cell = self.cell
-        # the inverse transform's 1 / (4 nx ny) folded in
-        self._kernel = padded_kernel(cell, self.contact_modulus)
-        self._kernel /= cell.npoints
-        self._rows = (cell.x_slice.start, min(cell.x_slice.stop, nx))  # map rows held here
+        self._plans = grid.zero_padded_plans()
+        symbol = padded_symbol(grid, self.contact_modulus)
+        symbol /= 4 * grid.npoints   # the inverse transform's 1 / (4 nx ny)
+        self._plans.set_kernel(symbol)
+        self._cell = None
+        self._begun = None   # the half-space whose half-made transform finish completes
         self._applications = 0
+
+    @property
+    def cell(self):
+        """The map's ``2 nx x 2 ny`` padded cell as a grid (made on first use: the
+        solvers on the gap run there, :mod:`petgap.solvers.free_boundary`).  Collective."""
+        if self._cell is None:
+            grid = self.grid
+            self._cell = Grid((2 * grid.nx, 2 * grid.ny), size=(2 * grid.Lx, 2 * grid.Ly),
+                              comm=grid.comm, planner=grid.planner, wisdom=grid.wisdom)
+        return self._cell
 
     def on_grid(self, grid):
         """The same body under a map on another grid (a coarse start's)."""
@@ -151,53 +207,88 @@ class FreeHalfSpace:
 
     def _compliance(self, field, out):
         """``out <- C * field`` on this rank's rows of the map (``out`` may be ``field``)."""
-        grid, cell = self.grid, self.cell
-        lo, hi = self._rows
         self._applications += 1
+        self._begun = None
         with event(OPERATOR_EVENT):
-            cell.real[...] = 0.0
-            for row, piece in move_rows(grid.comm, field, grid.x_slice.start, lo, max(hi, lo)):
-                cell.real[row - lo:row - lo + len(piece), :grid.ny] = piece
-            cell.forward()
-            cell.fourier *= self._kernel
-            cell.backward()
-            held = cell.real[:max(hi - lo, 0), :grid.ny]
-            start, stop = grid.x_slice.start, grid.x_slice.stop
-            for row, piece in move_rows(grid.comm, held, lo, start, stop):
-                out[row - start:row - start + len(piece)] = piece
+            self._plans.apply(field, out)
         return out
 
     def apply_in_buffer(self, inverse=False):
         """Apply ``C`` (``inverse=True``) or the preconditioning stiffness to ``grid.real``, in place."""
         if not inverse:
+            self._begun = None
             return self._periodic.apply_in_buffer(inverse=False)
         return self._compliance(self.grid.real, self.grid.real)
+
+    def _in_precision(self, values):
+        """``values`` in the grid's precision (``C`` is applied in it, whatever is asked)."""
+        return np.asarray(values, dtype=self.grid.dtype)
 
     def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None,
                      precision=None):
         """:meth:`ElasticHalfSpace.apply_sparse <petgap.mechanics.half_space.ElasticHalfSpace.apply_sparse>`
-        with ``C`` for ``inverse=True`` (the map's padded FFT buffer is scratch).
+        with ``C`` for ``inverse=True`` (to ``out``, ``gathered``, or ``grid.padded``).
 
         ``C`` is applied in the map's precision whatever ``precision`` asks:
         ``values`` and ``gathered`` are converted on the way in and out."""
+        self._begun = None
         if not inverse:
             return self._periodic.apply_sparse(pidx, values, inverse=False, out=out,
                                                gathered=gathered, precision=precision)
         grid = self.grid
-        padded = grid.padded
-        padded[...] = 0.0
-        padded.reshape(-1)[pidx] = values
-        self._compliance(grid.real, grid.real)
-        if gathered is not None:
-            gathered[...] = padded.reshape(-1)[pidx]
-        elif out is not None:
-            out[:, :grid.ny] = grid.real
+        pidx, values = _indices(pidx), self._in_precision(values)
+        self._applications += 1
+        with event(OPERATOR_EVENT):
+            if gathered is None:
+                self._plans.apply_sparse(pidx, values, out=grid.padded if out is None else out)
+            elif gathered.dtype == grid.dtype:
+                self._plans.apply_sparse(pidx, values, gathered=gathered)
+            else:
+                result = np.empty(len(pidx), dtype=grid.dtype)
+                self._plans.apply_sparse(pidx, values, gathered=result)
+                np.copyto(gathered, result, casting="same_kind")
+
+    def begin_sparse(self, pidx, values, inverse=False, precision=None):
+        """This rank's part of ``(t, C t)`` (``inverse=True``) from the forward half of the
+        pruned transform, with ``C t`` left half-made for :meth:`finish`; with
+        ``inverse=False`` the periodic stiffness's
+        (:meth:`ElasticHalfSpace.begin_sparse <petgap.mechanics.half_space.ElasticHalfSpace.begin_sparse>`).
+        ``C`` runs in the map's precision.  Each half counts half an application."""
+        if not inverse:
+            self._begun = self._periodic
+            return self._periodic.begin_sparse(pidx, values, inverse=False, precision=precision)
+        self._begun = self
+        self._applications += 0.5
+        with event(OPERATOR_HALF_EVENT):
+            return self._plans.begin_sparse(_indices(pidx), self._in_precision(values))
+
+    def begin_in_buffer(self, inverse=False):
+        """:meth:`begin_sparse` of the field in ``grid.real``."""
+        if not inverse:
+            self._begun = self._periodic
+            return self._periodic.begin_in_buffer(inverse=False)
+        self._begun = self
+        self._applications += 0.5
+        with event(OPERATOR_HALF_EVENT):
+            return self._plans.begin(self.grid.real)
+
+    def finish(self, precision=None):
+        """The field of the last begin into the FFT buffer ``grid.padded``.  Collective."""
+        if self._begun is None:
+            raise RuntimeError("no half-made transform to finish: a begin was not the last "
+                               "use of the operator")
+        begun, self._begun = self._begun, None
+        if begun is self._periodic:
+            return self._periodic.finish(precision=precision)
+        self._applications += 0.5
+        with event(OPERATOR_HALF_EVENT):
+            self._plans.end(self.grid.padded)
 
     def displacement(self, pressure, out=None):
         """Displacement ``u = C p`` on the map under the pressure ``p`` (mean included)."""
         if out is None:
-            out = np.empty(self.grid.local_shape)
-        return self._compliance(np.ascontiguousarray(pressure, dtype=float), out)
+            out = np.empty(self.grid.local_shape, dtype=self.grid.dtype)
+        return self._compliance(np.ascontiguousarray(pressure, dtype=self.grid.dtype), out)
 
     def pressure(self, displacement, out=None):
         """Not available: ``C`` has no fast inverse (module docstring)."""
@@ -209,9 +300,12 @@ class FreeHalfSpace:
         return self._periodic.point_stiffness()
 
     def complementary_energy(self, pressure):
-        """``(1/2) sum_x dx dy p(x) u(x)`` with ``u = C p`` (all ranks; one application)."""
-        u = self.displacement(pressure)
-        local = float(np.vdot(pressure, u))
+        """``(1/2) sum_x dx dy p(x) u(x)`` with ``u = C p``, by Parseval from the forward
+        half of the transform (all ranks)."""
+        self._begun = None
+        field = np.ascontiguousarray(pressure, dtype=self.grid.dtype)
+        local = self._plans.begin(field)
+        self._plans.half_made = False
         return 0.5 * self.grid.pixel_area * self.grid.comm.allreduce(local)
 
 

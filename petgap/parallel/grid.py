@@ -307,6 +307,36 @@ class Grid:
                             f"{self.dtype} ({self.precision} precision)")
         self._convolution.end(out)
 
+    def zero_padded_plans(self, planner=None, precision=None):
+        """Plans of a linear convolution over this grid's map by zero padding to ``2 nx x 2 ny``.
+
+        :class:`petgap.parallel._fftw_mpi.PaddedConvolutionPlans` in this grid's precision,
+        on buffers of their own (half the padded cell's: the map's rows and their
+        transpose) and this grid's rows; fields and flat indices are in rows of the
+        padded slab's width, like :attr:`padded`'s.  The caller gives the kernel
+        (``set_kernel``).  Collective; planned with this grid's effort and wisdom
+        unless ``planner`` says otherwise; ``precision`` other than the grid's (a
+        double kernel for single plans) goes without wisdom.
+        """
+        planner = self.planner if planner is None else planner
+        precision = self.precision if precision is None else precision
+        binding = BINDINGS[precision]
+        alloc, ln0, l0s, ln1, l1s = _fftw_mpi.local_size_transposed(self.comm, self.nx,
+                                                                   2 * self.ny)
+        if (ln0, l0s) != (self.local_shape[0], self.x_slice.start):
+            raise DecompositionError(f"the padded rows of a {self.nx} x {self.ny} map are split "
+                                     f"unlike the map's ({ln0} from {l0s} here)")
+        rows = _aligned_empty(alloc, binding.COMPLEX_DTYPE)
+        lines = _aligned_empty(alloc, binding.COMPLEX_DTYPE)
+        wisdom = self.wisdom and planner != "estimate" and precision == self.precision
+        if wisdom:
+            self._load_wisdom()
+        plans = binding.PaddedConvolutionPlans(self.comm, self.nx, self.ny, ln0, ln1, l1s,
+                                                     self.padded.shape[1], rows, lines, planner)
+        if wisdom:
+            self._save_wisdom()
+        return plans
+
     def _spoil(self):
         """A transform is about to use the FFT buffers: a half-made convolution in them (this
         grid's, or that of the other grid on the same buffers) is lost."""
