@@ -631,50 +631,63 @@ cdef inline void _cache_block_sizes(Py_ssize_t total, Py_ssize_t width_bytes,
 
 
 cdef class PaddedConvolutionPlans:
-    """``u = C * p`` over an ``nx x ny`` map, by Hockney's ``2 nx x 2 ny`` zero padding, pruned.
+    """``u = k * p`` over an ``nx x ny`` map, by zero padding to a ``cx x cy`` periodic cell, pruned.
 
-    The linear convolution of a map with an even kernel ``C`` is the circular
-    convolution on the padded cell, but half of the cell's input rows are zero and
-    three quarters of its output are discarded.  The 2D transform taken apart the
-    way FFTW-MPI builds it (:class:`ConvolutionPlans`) lets each stage see only what
+    A linear convolution of the map with a kernel ``k`` that is even in ``x`` and
+    ``y`` is the circular convolution on a cell large enough that no point of the
+    map sees another through the cell's images: ``2 nx x 2 ny`` for a kernel of
+    every offset the map holds (Hockney's padding; the free half-space's
+    compliance), less for a kernel that falls off fast (a stiffness).  On the
+    cell, the rows beyond the map's are zero and so is the end of each row, and
+    all output off the map is discarded.  The 2D transform taken apart the way
+    FFTW-MPI builds it (:class:`ConvolutionPlans`) lets each stage see only what
     is not zero or not discarded:
 
-    1. r2c transforms along ``y`` of length ``2 ny`` on the map's ``nx`` rows only
-       (the cell's other ``nx`` rows are zero), each row zero-filled in a buffer held
-       in cache, in the map's own slab decomposition: no rows move to another one;
-    2. a global transpose of these ``nx x (ny + 1)`` values (half the cell's);
-    3. per Fourier line (``ky``), the ``2 nx``-point transform along ``x`` of a line
-       whose second half is zero, the multiplication by the kernel's transform, and
-       the inverse transform, a few lines at a time in cache, keeping only the map's
-       ``nx`` outputs;
-    4. the transpose back and c2r transforms of the map's ``nx`` rows, keeping each
-       row's first ``ny`` outputs.
+    1. r2c transforms along ``y`` of length ``cy`` on the map's ``nx`` rows only,
+       each row zero-filled in a buffer held in cache, in the map's own slab
+       decomposition (no rows move to another);
+    2. a global transpose of these ``nx x (cy // 2 + 1)`` values;
+    3. per Fourier line (``ky``), the ``cx``-point transform along ``x`` of the
+       line's ``nx`` values and the zeros after them, the multiplication by the
+       kernel's transform, and the inverse transform, a few lines at a time in
+       cache, keeping only the map's ``nx`` outputs;
+    4. the transpose back, and c2r transforms of the map's ``nx`` rows, keeping
+       each row's first ``ny`` outputs.
 
-    Against the cell's full transform pair, stages 1, 2 and 4 move and transform half
-    the data; stage 3 transforms the whole cell (every wavevector of the cell carries
-    the product), but in cache, reading and writing half.  The ``q = 0`` mode is kept
-    (``C`` has a finite stiffness for the mean).
+    Against the cell's full transform pair, stages 1, 2 and 4 move and transform
+    ``nx / cx`` of the data; stage 3 transforms every line of the cell (every
+    wavevector of the cell carries the product), but in cache, reading and
+    writing ``nx / cx`` of it.
+
+    The form ``(p, k * p)`` needs the forward half only (by Parseval: ``p`` is
+    zero off the map), so :meth:`begin_sparse` stops after the forward ``x``
+    transforms without keeping them, and :meth:`end`, if the field is needed
+    after all, takes stage 3 from the transposed rows, which stay in the lines
+    buffer: a begin costs stages 1-2 and half of 3, an end the rest.
 
     Parameters
     ----------
     comm : mpi4py.MPI.Comm
     nx, ny : int
         The map's shape; ``nx`` is the distributed axis.
+    cx, cy : int
+        The cell's shape, at least the map's.
     local_n0, local_n1, local_1_start : int
         The map's rows here (FFTW-MPI's blocks of ``nx``), and the Fourier lines here
-        (of ``ny + 1``; may be 0): :func:`local_size_transposed` of ``(nx, 2 ny)``.
+        (of ``cy // 2 + 1``; may be 0): :func:`local_size_transposed` of ``(nx, cy)``.
     width : int
         Row length of the caller's fields (a padded slab's ``2 (ny // 2 + 1)``, or
         ``ny``): flat indices and whole fields are in rows of ``width``, the map's
         ``ny`` values first.
     rows, lines : arrays of :data:`COMPLEX_DTYPE`, ``alloc_local`` values each
-        The rows' ``y`` transforms and the same transposed; the same array for an
-        in-place transpose.  Scratch, owned by the caller.
+        The rows' ``y`` transforms and the same transposed.  Scratch, owned by the
+        caller.
     planner : str
         FFTW planner effort; measuring overwrites the buffers.
 
-    The kernel's transform (:meth:`set_kernel`) is real and even in ``x``: line ``j``
-    holds it at ``kx = 0 .. nx``, already divided by ``4 nx ny``.
+    The kernel's transform (:meth:`set_kernel`) is real and even in ``x``: line
+    ``j`` holds it at ``kx = 0 .. cx // 2``, divided by ``cx cy`` (the inverse
+    transform's normalisation).
     """
     cdef fftw_plan transpose_fwd
     cdef fftw_plan transpose_bwd
@@ -682,12 +695,12 @@ cdef class PaddedConvolutionPlans:
     cdef fftw_plan rows_bwd[2]
     cdef fftw_plan lines_fwd[2]   # in place on `line`
     cdef fftw_plan lines_bwd[2]
-    cdef real_t *block            # nrows[0] rows of 2 (ny + 1) reals
-    cdef fftw_complex *line       # nlines[0] lines of 2 nx complex values
+    cdef real_t *block            # nrows[0] rows of 2 (cy // 2 + 1) reals
+    cdef fftw_complex *line       # nlines[0] lines of cx complex values
     cdef fftw_complex *rows_data
     cdef fftw_complex *lines_data
     cdef const double *kernel_data
-    cdef Py_ssize_t nx, ny, ln0, width
+    cdef Py_ssize_t nx, ny, cx, cy, nyc, ln0, width
     cdef int nrows[2]
     cdef int nlines[2]
     cdef object comm, kernel
@@ -707,27 +720,32 @@ cdef class PaddedConvolutionPlans:
         self.line = NULL
         self.kernel_data = NULL
 
-    def __init__(self, MPI.Comm comm, Py_ssize_t nx, Py_ssize_t ny, Py_ssize_t local_n0,
-                 Py_ssize_t local_n1, Py_ssize_t local_1_start, Py_ssize_t width,
-                 cnp.ndarray rows, cnp.ndarray lines, str planner="measure"):
+    def __init__(self, MPI.Comm comm, Py_ssize_t nx, Py_ssize_t ny, Py_ssize_t cx,
+                 Py_ssize_t cy, Py_ssize_t local_n0, Py_ssize_t local_n1,
+                 Py_ssize_t local_1_start, Py_ssize_t width, cnp.ndarray rows,
+                 cnp.ndarray lines, str planner="measure"):
         if planner not in PLANNER_FLAGS:
             raise ValueError(f"planner={planner!r} is not one of {sorted(PLANNER_FLAGS)}")
         for name, a in (("rows", rows), ("lines", lines)):
             if a.dtype != COMPLEX_DTYPE or not a.flags.c_contiguous:
                 raise TypeError(f"{name} buffer must be C-contiguous "
                                 f"{np.dtype(COMPLEX_DTYPE).name}")
+        if cx < nx or cy < ny or nx < 1 or ny < 1:
+            raise ValueError(f"a {cx} x {cy} cell does not hold a {nx} x {ny} map")
         if local_n0 <= 0 or local_n1 < 0 or width < ny:
             raise ValueError("every rank needs a row of the map, and rows of at least ny values")
-        if (rows.size < local_n0 * (ny + 1) or lines.size < local_n1 * nx):
+        self.nyc = cy // 2 + 1
+        if rows.size < local_n0 * self.nyc or lines.size < local_n1 * nx:
             raise ValueError("the row or line buffer is too small for this rank's part")
         self.comm, self.rows, self.lines = comm, rows, lines
-        self.nx, self.ny, self.ln0, self.width = nx, ny, local_n0, width
+        self.nx, self.ny, self.cx, self.cy = nx, ny, cx, cy
+        self.ln0, self.width = local_n0, width
         self.local_n1, self.local_1_start = local_n1, local_1_start
-        _cache_block_sizes(local_n0, 2 * (ny + 1) * sizeof(real_t), self.nrows)
-        _cache_block_sizes(local_n1, 2 * nx * sizeof(fftw_complex), self.nlines)
+        _cache_block_sizes(local_n0, 2 * self.nyc * sizeof(real_t), self.nrows)
+        _cache_block_sizes(local_n1, cx * sizeof(fftw_complex), self.nlines)
         cdef unsigned flags = PLANNER_FLAGS[planner]
-        cdef int n_y = <int>(2 * ny), n_x = <int>(2 * nx)
-        cdef int row_width = <int>(2 * (ny + 1)), ncomplex = <int>(ny + 1)
+        cdef int n_y = <int>cy, n_x = <int>cx
+        cdef int row_width = <int>(2 * self.nyc), ncomplex = <int>self.nyc
         cdef int *nrows = self.nrows
         cdef int *nlines = self.nlines
         cdef MPI_Comm mcomm = comm.ob_mpi
@@ -740,10 +758,10 @@ cdef class PaddedConvolutionPlans:
         cdef bint ok = True
         with nogil:
             self.transpose_fwd = fftw_mpi_plan_many_transpose(
-                nx, ny + 1, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
+                nx, ncomplex, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
                 <real_t *>self.rows_data, <real_t *>self.lines_data, mcomm, flags)
             self.transpose_bwd = fftw_mpi_plan_many_transpose(
-                ny + 1, nx, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
+                ncomplex, nx, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
                 <real_t *>self.lines_data, <real_t *>self.rows_data, mcomm, flags)
             for k in range(2):
                 if nrows[k] > 0:
@@ -763,20 +781,21 @@ cdef class PaddedConvolutionPlans:
                         FFTW_BACKWARD, flags)
                     ok = ok and self.lines_fwd[k] != NULL and self.lines_bwd[k] != NULL
         if not ok or self.transpose_fwd == NULL or self.transpose_bwd == NULL:
-            raise RuntimeError(f"FFTW-MPI could not plan the padded convolution of a {nx} x {ny} "
-                               f"map")
+            raise RuntimeError(f"FFTW-MPI could not plan the convolution of a {nx} x {ny} map "
+                               f"on a {cx} x {cy} cell")
 
     def set_kernel(self, const double[:, ::1] kernel):
-        """The kernel's transform on this rank's lines, ``(local_n1, nx + 1)``, kept by reference."""
-        if kernel.shape[0] != self.local_n1 or kernel.shape[1] != self.nx + 1:
+        """The kernel's transform on this rank's lines, ``(local_n1, cx // 2 + 1)``, kept by
+        reference."""
+        if kernel.shape[0] != self.local_n1 or kernel.shape[1] != self.cx // 2 + 1:
             raise ValueError(f"the kernel has shape {tuple(kernel.shape)[:2]}, the lines here "
-                             f"need ({self.local_n1}, {self.nx + 1})")
+                             f"need ({self.local_n1}, {self.cx // 2 + 1})")
         self.kernel = kernel
         self.kernel_data = &kernel[0, 0] if self.local_n1 > 0 else NULL
 
     def transpose(self):
-        """The rows buffer's ``(local_n0, ny + 1)`` values to the lines buffer, transposed
-        (what the kernel's transform is made with).  Collective."""
+        """The rows buffer's ``(local_n0, cy // 2 + 1)`` values to the lines buffer, transposed
+        (what a kernel's transform can be made with).  Collective."""
         self.half_made = False
         with nogil:
             fftw_execute(self.transpose_fwd)
@@ -789,7 +808,7 @@ cdef class PaddedConvolutionPlans:
         the map's columns (the rows are transformed all the same, so that the
         collective stage after it runs on every rank).
         """
-        cdef Py_ssize_t ns = pidx.shape[0], w = self.width, w2 = 2 * (self.ny + 1)
+        cdef Py_ssize_t ns = pidx.shape[0], w = self.width, w2 = 2 * self.nyc
         cdef Py_ssize_t i0 = 0, k = 0, m, base, end, p, r
         cdef int which
         cdef bint ok = True
@@ -814,7 +833,7 @@ cdef class PaddedConvolutionPlans:
     cdef void _rows_dense(self, const real_t *field, Py_ssize_t stride) noexcept nogil:
         """Stage 1 for a whole field (this rank's rows, ``stride`` apart, the map's ``ny``
         columns first)."""
-        cdef Py_ssize_t i0 = 0, m, r, ny = self.ny, w2 = 2 * (self.ny + 1)
+        cdef Py_ssize_t i0 = 0, m, r, ny = self.ny, w2 = 2 * self.nyc
         cdef int which
         while i0 < self.ln0:
             m = min(<Py_ssize_t>self.nrows[0], self.ln0 - i0)
@@ -828,59 +847,68 @@ cdef class PaddedConvolutionPlans:
     cdef inline void _rows_forward(self, Py_ssize_t i0, Py_ssize_t m, int which) noexcept nogil:
         """The block's rows transformed along ``y`` in place, then to the rows buffer."""
         fftw_execute(self.rows_fwd[which])
-        memcpy(self.rows_data + i0 * (self.ny + 1), self.block,
-               m * (self.ny + 1) * sizeof(fftw_complex))
+        memcpy(self.rows_data + i0 * self.nyc, self.block, m * self.nyc * sizeof(fftw_complex))
 
     cdef double _lines_pass(self, bint form) noexcept nogil:
-        """Stages 2-3: transpose, then per line the ``2 nx`` transform, the kernel, the inverse.
+        """Stage 3 on the transposed rows in the lines buffer.
 
-        With ``form``, returns this rank's part of ``sum_q K_q |p_q|^2`` over the cell's
-        full plane (each ``ky`` line but ``0`` and ``ny`` stands for two), accumulated in
-        double: by Parseval, ``(p, C p)`` over the map, since ``p`` is zero outside it.
+        With ``form``, only the forward transforms, the lines buffer left as it was,
+        and returns this rank's part of ``sum_q k_q |p_q|^2`` over the cell's full
+        plane (each ``ky`` line but ``0`` and an even ``cy``'s ``cy / 2`` stands for
+        two), accumulated in double: by Parseval, ``(p, k * p)`` over the map, since
+        ``p`` is zero off it.  Without, the transforms, the kernel and the inverse
+        transforms, the map's part back to the lines buffer.
         """
-        cdef Py_ssize_t j0 = 0, j, g, m, nx = self.nx, n2 = 2 * self.nx
+        cdef Py_ssize_t j0 = 0, j, g, m, nx = self.nx, n = self.cx
         cdef int which
-        cdef double total = 0.0, part
-        fftw_execute(self.transpose_fwd)
+        cdef double total = 0.0, weight
         while j0 < self.local_n1:
             m = min(<Py_ssize_t>self.nlines[0], self.local_n1 - j0)
             which = 0 if m == self.nlines[0] else 1
             for j in range(m):
-                memcpy(self.line + j * n2, self.lines_data + (j0 + j) * nx,
+                memcpy(self.line + j * n, self.lines_data + (j0 + j) * nx,
                        nx * sizeof(fftw_complex))
-                memset(self.line + j * n2 + nx, 0, nx * sizeof(fftw_complex))
+                memset(self.line + j * n + nx, 0, (n - nx) * sizeof(fftw_complex))
             fftw_execute(self.lines_fwd[which])
-            for j in range(m):
-                part = self._multiply_line(j0 + j, <real_t *>(self.line + j * n2), form)
-                if form:
+            if form:
+                for j in range(m):
                     g = self.local_1_start + j0 + j
-                    total = total + (1.0 if g == 0 or g == self.ny else 2.0) * part
+                    weight = 1.0 if g == 0 or 2 * g == self.cy else 2.0
+                    total = total + weight * self._line_form(j0 + j, <real_t *>(self.line + j * n))
+                j0 += self.nlines[0]
+                continue
+            for j in range(m):
+                self._multiply_line(j0 + j, <real_t *>(self.line + j * n))
             fftw_execute(self.lines_bwd[which])
             for j in range(m):
-                memcpy(self.lines_data + (j0 + j) * nx, self.line + j * n2,
+                memcpy(self.lines_data + (j0 + j) * nx, self.line + j * n,
                        nx * sizeof(fftw_complex))
             j0 += self.nlines[0]
         return total
 
-    cdef double _multiply_line(self, Py_ssize_t j, real_t *s, bint form) noexcept nogil:
-        """Line ``j`` (``2 nx`` values at ``s``) times the kernel, even in ``kx``; with
-        ``form``, ``sum K |s|^2`` of the line as it was."""
-        cdef const double *kern = self.kernel_data + j * (self.nx + 1)
-        cdef Py_ssize_t i, nx = self.nx, n2 = 2 * self.nx
-        cdef double f, total = 0.0
-        if form:
-            for i in range(n2):
-                f = kern[i if i <= nx else n2 - i]
-                total = total + f * _norm2(s + 2 * i)
-        for i in range(nx + 1):
+    cdef double _line_form(self, Py_ssize_t j, const real_t *s) noexcept nogil:
+        """``sum_kx k |s|^2`` of line ``j`` (``cx`` values at ``s``), the kernel even in ``kx``."""
+        cdef const double *kern = self.kernel_data + j * (self.cx // 2 + 1)
+        cdef Py_ssize_t i, n = self.cx, half = self.cx // 2
+        cdef double total = _norm2(s) * kern[0]
+        for i in range(1, half + 1):   # kx and -kx together (an even cx's Nyquist once)
+            total = total + kern[i] * (_norm2(s + 2 * i)
+                                       + (_norm2(s + 2 * (n - i)) if n - i != i else 0.0))
+        return total
+
+    cdef void _multiply_line(self, Py_ssize_t j, real_t *s) noexcept nogil:
+        """Line ``j`` (``cx`` values at ``s``) times the kernel, even in ``kx``."""
+        cdef const double *kern = self.kernel_data + j * (self.cx // 2 + 1)
+        cdef Py_ssize_t i, n = self.cx, half = self.cx // 2
+        cdef double f
+        for i in range(half + 1):
             f = kern[i]
             s[2 * i] = <real_t>(s[2 * i] * f)
             s[2 * i + 1] = <real_t>(s[2 * i + 1] * f)
-        for i in range(nx + 1, n2):
-            f = kern[n2 - i]
+        for i in range(half + 1, n):
+            f = kern[n - i]
             s[2 * i] = <real_t>(s[2 * i] * f)
             s[2 * i + 1] = <real_t>(s[2 * i + 1] * f)
-        return total
 
     cdef void _back(self, real_t *out, Py_ssize_t stride, const index_t *pidx, Py_ssize_t ns,
                     real_t *gathered) noexcept nogil:
@@ -888,13 +916,13 @@ cdef class PaddedConvolutionPlans:
         ``out`` (rows ``stride`` apart, their first ``ny`` columns), or with ``gathered``
         to the ``ns`` points ``pidx``."""
         cdef Py_ssize_t i0 = 0, m, r, k = 0, base, end, p
-        cdef Py_ssize_t ny = self.ny, w = self.width, w2 = 2 * (self.ny + 1)
+        cdef Py_ssize_t ny = self.ny, w = self.width, w2 = 2 * self.nyc
         cdef int which
         fftw_execute(self.transpose_bwd)
         while i0 < self.ln0:
             m = min(<Py_ssize_t>self.nrows[0], self.ln0 - i0)
             which = 0 if m == self.nrows[0] else 1
-            memcpy(self.block, self.rows_data + i0 * (ny + 1), m * (ny + 1) * sizeof(fftw_complex))
+            memcpy(self.block, self.rows_data + i0 * self.nyc, m * self.nyc * sizeof(fftw_complex))
             fftw_execute(self.rows_bwd[which])
             if gathered == NULL:
                 for r in range(m):
@@ -932,17 +960,18 @@ cdef class PaddedConvolutionPlans:
         return 0
 
     def apply(self, const real_t[:, :] field, real_t[:, :] out):
-        """``out <- C * field`` (this rank's rows; ``out`` may be ``field``).  Collective."""
+        """``out <- k * field`` (this rank's rows; ``out`` may be ``field``).  Collective."""
         cdef Py_ssize_t fs = self._rows_of(field, "field"), os = self._rows_of(out, "out")
         self.half_made = False
         with nogil:
             self._rows_dense(&field[0, 0], fs)
+            fftw_execute(self.transpose_fwd)
             self._lines_pass(False)
             self._back(&out[0, 0], os, NULL, 0, NULL)
 
     def apply_sparse(self, const index_t[::1] pidx, const real_t[::1] values,
                      real_t[:, :] out=None, real_t[::1] gathered=None):
-        """``C * x`` of a field zero but at the sorted flat indices ``pidx`` (rows of
+        """``k * x`` of a field zero but at the sorted flat indices ``pidx`` (rows of
         ``width``): to ``out``, or with ``gathered`` only at ``pidx``.  Collective."""
         self._check_sparse(pidx, values, gathered)
         cdef Py_ssize_t os = 0, ns = pidx.shape[0]
@@ -958,6 +987,7 @@ cdef class PaddedConvolutionPlans:
         self.half_made = False
         with nogil:
             ok = self._rows_sparse(pidx, values)
+            fftw_execute(self.transpose_fwd)
             self._lines_pass(False)
             if o != NULL or g != NULL:
                 self._back(o, os, ip, ns, g)
@@ -968,13 +998,14 @@ cdef class PaddedConvolutionPlans:
                              "map's columns")
 
     def begin_sparse(self, const index_t[::1] pidx, const real_t[::1] values):
-        """Stages 1-3 of :meth:`apply_sparse`, returning this rank's part of ``(x, C x)``
-        (by Parseval); :meth:`end` gives the field.  Collective."""
+        """The forward half of :meth:`apply_sparse`: this rank's part of ``(x, k * x)`` (by
+        Parseval); :meth:`end` gives the field.  Collective."""
         self._check_sparse(pidx, values, None)
         cdef bint ok
         cdef double total
         with nogil:
             ok = self._rows_sparse(pidx, values)
+            fftw_execute(self.transpose_fwd)
             total = self._lines_pass(True)
         self.half_made = ok
         if not ok:
@@ -988,18 +1019,20 @@ cdef class PaddedConvolutionPlans:
         cdef double total
         with nogil:
             self._rows_dense(&field[0, 0], fs)
+            fftw_execute(self.transpose_fwd)
             total = self._lines_pass(True)
         self.half_made = True
         return total
 
     def end(self, real_t[:, :] out):
-        """Stage 4 after a begin: ``C * x`` to ``out``.  Collective."""
+        """The rest after a begin: ``k * x`` to ``out``.  Collective."""
         cdef Py_ssize_t os = self._rows_of(out, "out")
         if not self.half_made:
             raise RuntimeError("no half-made convolution to finish: a begin was not the last "
                                "use of these plans")
         self.half_made = False
         with nogil:
+            self._lines_pass(False)
             self._back(&out[0, 0], os, NULL, 0, NULL)
 
     def __dealloc__(self):

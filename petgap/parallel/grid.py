@@ -307,8 +307,10 @@ class Grid:
                             f"{self.dtype} ({self.precision} precision)")
         self._convolution.end(out)
 
-    def zero_padded_plans(self, planner=None, precision=None):
-        """Plans of a linear convolution over this grid's map by zero padding to ``2 nx x 2 ny``.
+    def zero_padded_plans(self, cell=None, planner=None, precision=None):
+        """Plans of a linear convolution over this grid's map by zero padding to a larger cell.
+
+        ``cell``: the periodic cell's shape, ``(2 nx, 2 ny)`` by default (Hockney's).
 
         :class:`petgap.parallel._fftw_mpi.PaddedConvolutionPlans` in this grid's precision,
         on buffers of their own (half the padded cell's: the map's rows and their
@@ -321,8 +323,8 @@ class Grid:
         planner = self.planner if planner is None else planner
         precision = self.precision if precision is None else precision
         binding = BINDINGS[precision]
-        alloc, ln0, l0s, ln1, l1s = _fftw_mpi.local_size_transposed(self.comm, self.nx,
-                                                                   2 * self.ny)
+        cx, cy = (2 * self.nx, 2 * self.ny) if cell is None else cell
+        alloc, ln0, l0s, ln1, l1s = _fftw_mpi.local_size_transposed(self.comm, self.nx, cy)
         if (ln0, l0s) != (self.local_shape[0], self.x_slice.start):
             raise DecompositionError(f"the padded rows of a {self.nx} x {self.ny} map are split "
                                      f"unlike the map's ({ln0} from {l0s} here)")
@@ -331,8 +333,8 @@ class Grid:
         wisdom = self.wisdom and planner != "estimate" and precision == self.precision
         if wisdom:
             self._load_wisdom()
-        plans = binding.PaddedConvolutionPlans(self.comm, self.nx, self.ny, ln0, ln1, l1s,
-                                                     self.padded.shape[1], rows, lines, planner)
+        plans = binding.PaddedConvolutionPlans(self.comm, self.nx, self.ny, cx, cy, ln0, ln1,
+                                               l1s, self.padded.shape[1], rows, lines, planner)
         if wisdom:
             self._save_wisdom()
         return plans
