@@ -59,6 +59,12 @@ from petgap.parallel.grid import Grid, row_blocks
 from petgap.parallel.log import OPERATOR_EVENT, OPERATOR_HALF_EVENT, event
 
 
+#: Pixels of zeros beyond the map's far edges on the cell of the preconditioning stiffness
+#: (:func:`margin_cell`): its kernel falls like ``1 / r^3``, so the map's opposite edges,
+#: neighbours on the map's own periodic grid, barely couple across this margin.
+MARGIN = 16
+
+
 def influence_coefficients(x, y, dx, dy, contact_modulus=1.0):
     """Displacement at ``(x, y)`` under a unit pressure on the ``dx x dy`` pixel at the origin.
 
@@ -146,14 +152,52 @@ def _indices(pidx):
     return np.asarray(pidx, dtype=np.int32)
 
 
+def fft_size(n):
+    """The smallest ``2^a 3^b 5^c 7^d >= n``: a length FFTW transforms fast."""
+    best = 1 << max(int(n) - 1, 0).bit_length()
+    p7 = 1
+    while p7 < best:
+        p5 = p7
+        while p5 < best:
+            p3 = p5
+            while p3 < best:
+                m = p3
+                while m < n:
+                    m *= 2
+                best = min(best, m)
+                p3 *= 3
+            p5 *= 5
+        p7 *= 7
+    return best
+
+
+def margin_cell(grid, margin=None):
+    """The cell on which the preconditioning stiffness is applied: the map with at least
+    ``margin`` (:data:`MARGIN`) pixels of zeros beyond its far edges, FFT-friendly."""
+    margin = MARGIN if margin is None else margin
+    return (min(fft_size(grid.nx + margin), 2 * grid.nx),
+            min(fft_size(grid.ny + margin), 2 * grid.ny))
+
+
+def stiffness_symbol(grid, plans, cell, contact_modulus):
+    """``E* |q| / 2`` on the lines ``plans`` hold of the periodic ``cell`` with ``grid``'s
+    pixels, ``(local_n1, cx // 2 + 1)``, divided by ``cx cy``; ``q = 0`` gives 0."""
+    cx, cy = cell
+    lo, n1 = plans.local_1_start, plans.local_n1
+    qx = 2 * np.pi * np.arange(cx // 2 + 1) / (cx * grid.dx)
+    qy = 2 * np.pi * np.arange(lo, lo + n1) / (cy * grid.dy)
+    return contact_modulus / (2.0 * cx * cy) * np.hypot(qy[:, None], qx[None, :])
+
+
 class FreeHalfSpace:
     """The infinite elastic half-space under pressures on a finite map.
 
     Same interface as :class:`~petgap.mechanics.half_space.ElasticHalfSpace`
     where the operator exists: :meth:`displacement` and ``apply_sparse`` /
-    ``apply_in_buffer`` with ``inverse=True`` are the exact compliance; with
-    ``inverse=False`` they are the periodic stiffness, a preconditioner (module
-    docstring).  ``periodic`` is False.
+    ``apply_in_buffer`` / ``begin_sparse`` with ``inverse=True`` are the exact
+    compliance; with ``inverse=False`` they are the preconditioning stiffness, the
+    half-space's stiffness on the map alone (module docstring).  ``periodic`` is
+    False.
 
     Parameters
     ----------
@@ -163,13 +207,13 @@ class FreeHalfSpace:
     contact_modulus : float
         ``E*``, positive.
 
-    Collective: builds a ``2 nx x 2 ny`` grid on ``grid``'s communicator with
-    the same FFTW planner, and transforms the kernel once.
+    Collective: plans the pruned transforms of both operators on ``grid``'s
+    communicator with its FFTW planner, and transforms ``C`` once.
     """
 
     periodic = False
-    #: ``C`` is applied in the map's precision (``apply_sparse``): a whole-slab result
-    #: stays in ``grid.padded``, in the grid's precision.
+    #: both operators run in the map's precision (``apply_sparse``): a whole-slab result
+    #: goes to ``grid.padded``, in the grid's precision.
     transforms_in_single = False
     #: ``begin_sparse`` gives ``(t, C t)`` from the forward half of the pruned transform
     splits_transforms = True
@@ -178,12 +222,17 @@ class FreeHalfSpace:
         self._periodic = ElasticHalfSpace(grid, contact_modulus)
         self.grid = grid
         self.contact_modulus = self._periodic.contact_modulus
-        self._plans = grid.zero_padded_plans()
+        compliance = grid.zero_padded_plans()
         symbol = padded_symbol(grid, self.contact_modulus)
         symbol /= 4 * grid.npoints   # the inverse transform's 1 / (4 nx ny)
-        self._plans.set_kernel(symbol)
+        compliance.set_kernel(symbol)
+        cell = margin_cell(grid)
+        stiffness = grid.zero_padded_plans(cell, buffers=(compliance.rows, compliance.lines))
+        stiffness.set_kernel(stiffness_symbol(grid, stiffness, cell, self.contact_modulus))
+        #: the pruned plans of ``C`` (True) and of the stiffness (False), on shared buffers
+        self._plans = {True: compliance, False: stiffness}
         self._cell = None
-        self._begun = None   # the half-space whose half-made transform finish completes
+        self._begun = None   # the plans whose half-made transform finish completes
         self._applications = 0
 
     @property
@@ -202,87 +251,87 @@ class FreeHalfSpace:
 
     @property
     def applications(self):
-        """Applications of the compliance or of the preconditioning stiffness so far."""
-        return self._applications + self._periodic.applications
+        """Applications of the compliance or of the preconditioning stiffness so far, in
+        transform pairs (a begin and :meth:`finish` count a half each)."""
+        return self._applications
+
+    def _use(self, inverse):
+        """The plans of ``C`` (``inverse``) or of the stiffness, about to run: the buffers
+        they share lose any half-made transform."""
+        self._begun = None
+        return self._plans[bool(inverse)]
 
     def _compliance(self, field, out):
         """``out <- C * field`` on this rank's rows of the map (``out`` may be ``field``)."""
+        plans = self._use(True)
         self._applications += 1
-        self._begun = None
         with event(OPERATOR_EVENT):
-            self._plans.apply(field, out)
+            plans.apply(field, out)
         return out
 
     def apply_in_buffer(self, inverse=False):
         """Apply ``C`` (``inverse=True``) or the preconditioning stiffness to ``grid.real``, in place."""
-        if not inverse:
-            self._begun = None
-            return self._periodic.apply_in_buffer(inverse=False)
-        return self._compliance(self.grid.real, self.grid.real)
+        plans = self._use(inverse)
+        self._applications += 1
+        with event(OPERATOR_EVENT):
+            plans.apply(self.grid.real, self.grid.real)
+        return self.grid.real
 
     def _in_precision(self, values):
-        """``values`` in the grid's precision (``C`` is applied in it, whatever is asked)."""
+        """``values`` in the grid's precision (the operators run in it, whatever is asked)."""
         return np.asarray(values, dtype=self.grid.dtype)
 
     def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None,
                      precision=None):
         """:meth:`ElasticHalfSpace.apply_sparse <petgap.mechanics.half_space.ElasticHalfSpace.apply_sparse>`
-        with ``C`` for ``inverse=True`` (to ``out``, ``gathered``, or ``grid.padded``).
+        with ``C`` (``inverse=True``) or the preconditioning stiffness, to ``out``,
+        ``gathered``, or ``grid.padded``.
 
-        ``C`` is applied in the map's precision whatever ``precision`` asks:
-        ``values`` and ``gathered`` are converted on the way in and out."""
-        self._begun = None
-        if not inverse:
-            return self._periodic.apply_sparse(pidx, values, inverse=False, out=out,
-                                               gathered=gathered, precision=precision)
+        Both run in the map's precision whatever ``precision`` asks: ``values`` and
+        ``gathered`` are converted on the way in and out."""
         grid = self.grid
+        plans = self._use(inverse)
         pidx, values = _indices(pidx), self._in_precision(values)
         self._applications += 1
         with event(OPERATOR_EVENT):
             if gathered is None:
-                self._plans.apply_sparse(pidx, values, out=grid.padded if out is None else out)
+                plans.apply_sparse(pidx, values, out=grid.padded if out is None else out)
             elif gathered.dtype == grid.dtype:
-                self._plans.apply_sparse(pidx, values, gathered=gathered)
+                plans.apply_sparse(pidx, values, gathered=gathered)
             else:
                 result = np.empty(len(pidx), dtype=grid.dtype)
-                self._plans.apply_sparse(pidx, values, gathered=result)
+                plans.apply_sparse(pidx, values, gathered=result)
                 np.copyto(gathered, result, casting="same_kind")
 
     def begin_sparse(self, pidx, values, inverse=False, precision=None):
-        """This rank's part of ``(t, C t)`` (``inverse=True``) from the forward half of the
-        pruned transform, with ``C t`` left half-made for :meth:`finish`; with
-        ``inverse=False`` the periodic stiffness's
-        (:meth:`ElasticHalfSpace.begin_sparse <petgap.mechanics.half_space.ElasticHalfSpace.begin_sparse>`).
-        ``C`` runs in the map's precision.  Each half counts half an application."""
-        if not inverse:
-            self._begun = self._periodic
-            return self._periodic.begin_sparse(pidx, values, inverse=False, precision=precision)
-        self._begun = self
+        """This rank's part of ``(t, C t)`` (``inverse=True``, or of the stiffness's form)
+        from the forward half of the pruned transform, the field left half-made for
+        :meth:`finish`; in the map's precision.  Each half counts half an application."""
+        plans = self._use(inverse)
         self._applications += 0.5
         with event(OPERATOR_HALF_EVENT):
-            return self._plans.begin_sparse(_indices(pidx), self._in_precision(values))
+            total = plans.begin_sparse(_indices(pidx), self._in_precision(values))
+        self._begun = plans
+        return total
 
     def begin_in_buffer(self, inverse=False):
         """:meth:`begin_sparse` of the field in ``grid.real``."""
-        if not inverse:
-            self._begun = self._periodic
-            return self._periodic.begin_in_buffer(inverse=False)
-        self._begun = self
+        plans = self._use(inverse)
         self._applications += 0.5
         with event(OPERATOR_HALF_EVENT):
-            return self._plans.begin(self.grid.real)
+            total = plans.begin(self.grid.real)
+        self._begun = plans
+        return total
 
     def finish(self, precision=None):
         """The field of the last begin into the FFT buffer ``grid.padded``.  Collective."""
         if self._begun is None:
             raise RuntimeError("no half-made transform to finish: a begin was not the last "
-                               "use of the operator")
-        begun, self._begun = self._begun, None
-        if begun is self._periodic:
-            return self._periodic.finish(precision=precision)
+                               "use of the operators")
+        plans, self._begun = self._begun, None
         self._applications += 0.5
         with event(OPERATOR_HALF_EVENT):
-            self._plans.end(self.grid.padded)
+            plans.end(self.grid.padded)
 
     def displacement(self, pressure, out=None):
         """Displacement ``u = C p`` on the map under the pressure ``p`` (mean included)."""
@@ -302,10 +351,10 @@ class FreeHalfSpace:
     def complementary_energy(self, pressure):
         """``(1/2) sum_x dx dy p(x) u(x)`` with ``u = C p``, by Parseval from the forward
         half of the transform (all ranks)."""
-        self._begun = None
+        plans = self._use(True)
         field = np.ascontiguousarray(pressure, dtype=self.grid.dtype)
-        local = self._plans.begin(field)
-        self._plans.half_made = False
+        local = plans.begin(field)
+        plans.half_made = False
         return 0.5 * self.grid.pixel_area * self.grid.comm.allreduce(local)
 
 

@@ -307,7 +307,7 @@ class Grid:
                             f"{self.dtype} ({self.precision} precision)")
         self._convolution.end(out)
 
-    def zero_padded_plans(self, cell=None, planner=None, precision=None):
+    def zero_padded_plans(self, cell=None, planner=None, precision=None, buffers=None):
         """Plans of a linear convolution over this grid's map by zero padding to a larger cell.
 
         ``cell``: the periodic cell's shape, ``(2 nx, 2 ny)`` by default (Hockney's).
@@ -318,7 +318,9 @@ class Grid:
         padded slab's width, like :attr:`padded`'s.  The caller gives the kernel
         (``set_kernel``).  Collective; planned with this grid's effort and wisdom
         unless ``planner`` says otherwise; ``precision`` other than the grid's (a
-        double kernel for single plans) goes without wisdom.
+        double kernel for single plans) goes without wisdom.  ``buffers``: the
+        ``(rows, lines)`` of other such plans of a cell at least as large, to share
+        (each use of either plans then overwrites the other's; planning too).
         """
         planner = self.planner if planner is None else planner
         precision = self.precision if precision is None else precision
@@ -328,8 +330,11 @@ class Grid:
         if (ln0, l0s) != (self.local_shape[0], self.x_slice.start):
             raise DecompositionError(f"the padded rows of a {self.nx} x {self.ny} map are split "
                                      f"unlike the map's ({ln0} from {l0s} here)")
-        rows = _aligned_empty(alloc, binding.COMPLEX_DTYPE)
-        lines = _aligned_empty(alloc, binding.COMPLEX_DTYPE)
+        if buffers is None:
+            rows = _aligned_empty(alloc, binding.COMPLEX_DTYPE)
+            lines = _aligned_empty(alloc, binding.COMPLEX_DTYPE)
+        else:
+            rows, lines = buffers   # the plans check that they are large enough
         wisdom = self.wisdom and planner != "estimate" and precision == self.precision
         if wisdom:
             self._load_wisdom()
