@@ -821,7 +821,7 @@ cdef class PaddedConvolutionPlans:
             while k < ns and pidx[k] < end:
                 p = pidx[k] - base
                 r = p // w
-                if p < 0 or p - r * w >= self.ny:
+                if p < 0 or p - r * w >= self.ny or (k > 0 and pidx[k] <= pidx[k - 1]):
                     ok = False  # unsorted, negative, or off the map's columns
                     break
                 self.block[r * w2 + p - r * w] = values[k]
