@@ -251,7 +251,7 @@ class RestrictedStiffness:
         self.comm, self.transforms, self.load = problem.grid.comm, transforms, load
         self.edge = EdgeCorrection(half_space, mask, theta) if theta > 0 else None
         self.patch = (patch_interaction(half_space, theta, settings.interaction_block)
-                      if self.edge is not None and load else None)
+                      if self.edge is not None and (load or not half_space.periodic) else None)
         self.admission = PatchAdmission(None if self.patch is None else self.patch.block_area)
 
     @property

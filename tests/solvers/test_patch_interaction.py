@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from petgap.mechanics.free_half_space import FreeHalfSpace, influence_coefficients
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
@@ -109,6 +110,26 @@ def test_the_coarse_solve_is_the_woodbury_middle(comm):
     y = far.solve(w, d)
     assert np.abs(y - expected).max() <= 1e-5 * np.abs(expected).max()   # INNER_TOLERANCE 1e-6
     assert far.inner_iterations > 0
+
+
+def test_the_free_coarse_solve_is_the_free_maps(comm):
+    """On a free map, ``(F^{-1} + D) y = w`` with ``F`` Love's block compliance over the
+    map's blocks alone (a dense direct sum, no transform, no images)."""
+    grid = Grid((96, 60), size=SIZE, comm=comm, planner="estimate")
+    far = PatchInteraction(grid, E_STAR, theta=0.6, block=12, periodic=False)
+    mx, my = far.mx, far.my
+    bx, by = SIZE[0] / mx, SIZE[1] / my
+    i, j = np.meshgrid(np.arange(mx), np.arange(my), indexing="ij")
+    f = influence_coefficients((i.ravel()[:, None] - i.ravel()[None, :]) * bx,
+                               (j.ravel()[:, None] - j.ravel()[None, :]) * by, bx, by,
+                               E_STAR) / far.block_area
+    rng = np.random.default_rng(12)
+    w, d = rng.standard_normal(mx * my), rng.random(mx * my) * 50
+    expected = np.linalg.solve(np.linalg.inv(f) + np.diag(d), w)
+    y = far.solve(w, d)
+    assert np.abs(y - expected).max() <= 1e-5 * np.abs(expected).max()
+    assert patch_interaction(FreeHalfSpace(Grid((1024, 1024), comm=comm, planner="estimate")),
+                             0.6).shape == (64, 64)
 
 
 def test_no_interaction_where_it_does_not_apply(comm):
