@@ -42,14 +42,20 @@ step length pays for the inverse half only when it needs the field
 
 The stiffness ``K = C^{-1}`` has no such fast form.  The pressure solver needs
 ``K`` only as its preconditioner (an approximate inverse of ``C`` on the
-contact set), and there the periodic stiffness on the map's own grid serves:
-restricted to the contact set, ``C`` and the periodic compliance differ by the
-images' smooth field, which leaves the edges -- the part that needs
-preconditioning -- alike.  So ``apply_sparse(..., inverse=False)`` and
-``apply_in_buffer(inverse=False)`` apply the periodic stiffness, and
-:meth:`FreeHalfSpace.pressure` refuses; solvers that need the exact ``K``
+contact set), and there the half-space's stiffness ``E* |q| / 2`` on the map
+alone serves: restricted to the contact set, ``C`` and the compliance of that
+stiffness differ by a smooth field and by the discretisation, which leaves the
+edges -- the part that needs preconditioning -- alike.  Applied on the map's
+own periodic grid it would couple the map's opposite edges as neighbours (its
+kernel is short, ``1 / r^3``, but nearest neighbours across the seam are what
+it couples most), so it is applied on a cell :data:`MARGIN` pixels larger than
+the map, by the same pruned plans: zeros beyond the map's far edges, as the
+free body has no material pressed there.  So ``apply_sparse(...,
+inverse=False)`` and ``apply_in_buffer(inverse=False)`` apply that stiffness,
+and :meth:`FreeHalfSpace.pressure` refuses; solvers that need the exact ``K``
 (the gap formulation, TAO's bound-constrained methods) do not run on a free
-boundary (:func:`petgap.solvers.dispatch.solve` says so).
+map itself (:func:`petgap.solvers.dispatch.solve` sends the gap solvers to its
+padded cell).
 """
 import numpy as np
 from mpi4py import MPI

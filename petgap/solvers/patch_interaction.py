@@ -44,8 +44,9 @@ The term is smooth over whole blocks, and the solver's projection onto ``p >=
 0`` is not: the pressure solver applies it only once the contact set has nearly
 stopped changing, and withdraws it for a while when the residual rose after a
 step with it (:class:`petgap.solvers.preconditioners.PatchAdmission`; docs/design.md,
-"When the patch interaction applies").  The solver makes it under load control
-only (:class:`petgap.solvers.preconditioners.RestrictedStiffness` says why).
+"When the patch interaction applies").  The solver makes it under load control,
+and on a free map under indentation too
+(:class:`petgap.solvers.preconditioners.RestrictedStiffness` says why).
 
 Cost: one pass over ``S`` for the block sums, one to subtract ``V y``, an
 all-reduce of two coarse fields, and a few dozen transforms of the coarse grid,
