@@ -680,8 +680,9 @@ cdef class PaddedConvolutionPlans:
         ``ny``): flat indices and whole fields are in rows of ``width``, the map's
         ``ny`` values first.
     rows, lines : arrays of :data:`COMPLEX_DTYPE`, ``alloc_local`` values each
-        The rows' ``y`` transforms and the same transposed.  Scratch, owned by the
-        caller.
+        The rows' ``y`` transforms and the same transposed; the same array for
+        in-place transposes (half the memory, and less traffic).  Scratch, owned by
+        the caller.
     planner : str
         FFTW planner effort; measuring overwrites the buffers.
 

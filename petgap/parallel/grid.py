@@ -313,8 +313,8 @@ class Grid:
         ``cell``: the periodic cell's shape, ``(2 nx, 2 ny)`` by default (Hockney's).
 
         :class:`petgap.parallel._fftw_mpi.PaddedConvolutionPlans` in this grid's precision,
-        on buffers of their own (half the padded cell's: the map's rows and their
-        transpose) and this grid's rows; fields and flat indices are in rows of the
+        on a buffer of their own (the map's rows transformed along ``y``, transposed in
+        place: half the padded cell's, and faster than two) and this grid's rows; fields and flat indices are in rows of the
         padded slab's width, like :attr:`padded`'s.  The caller gives the kernel
         (``set_kernel``).  Collective; planned with this grid's effort and wisdom
         unless ``planner`` says otherwise; ``precision`` other than the grid's (a
@@ -331,8 +331,7 @@ class Grid:
             raise DecompositionError(f"the padded rows of a {self.nx} x {self.ny} map are split "
                                      f"unlike the map's ({ln0} from {l0s} here)")
         if buffers is None:
-            rows = _aligned_empty(alloc, binding.COMPLEX_DTYPE)
-            lines = _aligned_empty(alloc, binding.COMPLEX_DTYPE)
+            rows = lines = _aligned_empty(alloc, binding.COMPLEX_DTYPE)
         else:
             rows, lines = buffers   # the plans check that they are large enough
         wisdom = self.wisdom and planner != "estimate" and precision == self.precision
