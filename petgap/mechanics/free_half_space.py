@@ -81,18 +81,31 @@ def influence_coefficients(x, y, dx, dy, contact_modulus=1.0):
     ``dx dy / (pi E* r)``.
     """
     x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-
-    def primitive(s, t):
-        # s asinh(t / |s|) + t asinh(s / |t|), each term 0 where its divisor is
-        with np.errstate(divide="ignore", invalid="ignore"):
-            a = np.where(s != 0, s * np.arcsinh(t / np.abs(s)), 0.0)
-            b = np.where(t != 0, t * np.arcsinh(s / np.abs(t)), 0.0)
-        return a + b
-
     hx, hy = dx / 2, dy / 2
-    total = (primitive(x + hx, y + hy) - primitive(x - hx, y + hy)
-             - primitive(x + hx, y - hy) + primitive(x - hx, y - hy))
+    total = (_primitive(x + hx, y + hy) - _primitive(x - hx, y + hy)
+             - _primitive(x + hx, y - hy) + _primitive(x - hx, y - hy))
     return total / (np.pi * contact_modulus)
+
+
+def _primitive(s, t):
+    """``s asinh(t / |s|) + t asinh(s / |t|)``, each term 0 where its divisor is."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where(s != 0, s * np.arcsinh(t / np.abs(s)), 0.0)
+        b = np.where(t != 0, t * np.arcsinh(s / np.abs(t)), 0.0)
+    return a + b
+
+
+def influence_grid(i0, i1, j0, j1, dx, dy, contact_modulus=1.0):
+    """:func:`influence_coefficients` at the offsets ``(i dx, j dy)``, ``i0 <= i < i1``,
+    ``j0 <= j < j1``: the primitive once per pixel corner, differenced.
+
+    Neighbouring pixels share their corners, so a block of offsets needs the
+    primitive at a quarter of the points the pointwise formula evaluates it at.
+    """
+    xs = (np.arange(i0, i1 + 1) - 0.5) * dx
+    ys = (np.arange(j0, j1 + 1) - 0.5) * dy
+    f = _primitive(xs[:, None], ys[None, :])
+    return (f[1:, 1:] - f[:-1, 1:] - f[1:, :-1] + f[:-1, :-1]) / (np.pi * contact_modulus)
 
 
 def padded_kernel(cell, contact_modulus):
@@ -137,16 +150,15 @@ def padded_symbol(grid, contact_modulus):
     """
     nx, ny, dx, dy = grid.nx, grid.ny, grid.dx, grid.dy
     plans = grid.zero_padded_plans(planner="estimate", precision="double")
-    y = np.arange(ny + 1) * dy
-    i = np.arange(grid.x_slice.start, grid.x_slice.stop)
-    rows = plans.rows[:len(i) * (ny + 1)].reshape(len(i), ny + 1)
-    for block in row_blocks(len(i), ncols=ny + 1):
-        rows[block] = _dct1(influence_coefficients(i[block, None] * dx, y[None, :], dx, dy,
-                                                   contact_modulus))
+    first, count = grid.x_slice.start, grid.local_shape[0]
+    rows = plans.rows[:count * (ny + 1)].reshape(count, ny + 1)
+    for block in row_blocks(count, ncols=ny + 1):
+        rows[block] = _dct1(influence_grid(first + block.start, first + block.stop, 0, ny + 1,
+                                           dx, dy, contact_modulus))
     plans.transpose()
     lo, n1 = plans.local_1_start, plans.local_n1
     lines = plans.lines[:n1 * nx].reshape(n1, nx)
-    last = _dct1(influence_coefficients(nx * dx, y, dx, dy, contact_modulus))[lo:lo + n1]
+    last = _dct1(influence_grid(nx, nx + 1, 0, ny + 1, dx, dy, contact_modulus)[0])[lo:lo + n1]
     symbol = np.empty((n1, nx + 1))
     for block in row_blocks(n1, ncols=2 * nx):
         symbol[block] = _dct1(np.concatenate([lines[block].real, last[block, None]], axis=1))

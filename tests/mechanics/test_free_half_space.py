@@ -6,8 +6,8 @@ from mpi4py import MPI
 
 import petgap
 from petgap.mechanics.free_half_space import (FreeHalfSpace, PaddedCellHalfSpace,
-                                               influence_coefficients, margin_cell,
-                                               padded_kernel)
+                                               influence_coefficients, influence_grid,
+                                               margin_cell, padded_kernel)
 from petgap.parallel.dottest import dottest
 from petgap.parallel.grid import Grid
 from petgap.surfaces.indenters import indenter
@@ -33,6 +33,15 @@ def test_influence_coefficients_limits():
     xs, ys = np.meshgrid(s * dx, s * dy, indexing="ij")
     near = np.mean(1 / np.hypot(2.0 - xs, 1.0 - ys)) * dx * dy / (np.pi * e)
     assert influence_coefficients(2.0, 1.0, dx, dy, e) == pytest.approx(near, rel=1e-5)
+
+
+def test_influence_grid_is_the_pointwise_formula():
+    """The corner-shared evaluation equals the pointwise one, negative offsets included."""
+    dx, dy, e = 0.7, 1.3, 2.5
+    grid = influence_grid(-5, 40, -3, 30, dx, dy, e)
+    i, j = np.meshgrid(np.arange(-5, 40), np.arange(-3, 30), indexing="ij")
+    pointwise = influence_coefficients(i * dx, j * dy, dx, dy, e)
+    np.testing.assert_allclose(grid, pointwise, rtol=1e-11)
 
 
 @pytest.mark.parametrize("shape", [(12, 10), (9, 7)])
