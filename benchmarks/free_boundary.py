@@ -9,8 +9,9 @@ pruned transform).  Printed per size and rank count: iterations, applications of
 elastic operator, wall time of the solve (coarse start included), time per iteration, the
 FFTW-MPI pair floor of ``n^2`` and ``(2n)^2`` measured in the same run
 (benchmarks/fft_floor.c), the free operator's pruned pair (``C p`` of a whole field,
-median of 5) in ms and in ``n^2`` floor pairs, the free solve's time and iterations over
-the periodic one's, and the peak memory per map point (peak RSS less the RSS before the
+median of 5) in ms and in ``n^2`` floor pairs, the free solve's wall time, CPU time
+(summed over the ranks: on a shared machine it moves less with the other jobs than the
+wall time) and iterations over the periodic one's, and the peak memory per map point (peak RSS less the RSS before the
 grid, summed over ranks; each boundary solved in a process of its own).
 
 ``--shape NXxNY`` and ``--pixel DXxDY`` solve one non-square map with non-unit pixels
@@ -61,11 +62,13 @@ print("TAMAAS " + json.dumps({"time": dt, "contact_fraction": float((p > 0).mean
 
 
 def _timed(comm, func):
+    """``(func(), wall seconds, CPU seconds summed over the ranks)``."""
     comm.Barrier()
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), time.process_time()
     result = func()
+    cpu = time.process_time() - cpu
     comm.Barrier()
-    return result, time.perf_counter() - t
+    return result, time.perf_counter() - t, comm.allreduce(cpu)
 
 
 def worker(shape, size, path, boundary, controls):
@@ -80,10 +83,12 @@ def worker(shape, size, path, boundary, controls):
     h = petgap.load_topography(grid, path)
     body = petgap.ElasticHalfSpace(grid) if boundary == "periodic" else petgap.FreeHalfSpace(grid)
     problem = petgap.ContactProblem(grid, h, body)
-    s, dt = _timed(comm, lambda: petgap.solve(problem, petgap.Load(LOAD), tolerance=TOLERANCE))
+    s, dt, cpu = _timed(comm, lambda: petgap.solve(problem, petgap.Load(LOAD),
+                                                   tolerance=TOLERANCE))
     peak = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) * 1024
     result = {"iterations": s.iterations, "applications": s.operator_applications, "time": dt,
-              "converged": s.converged, "c": s.contact_fraction, "bytes": peak / grid.npoints}
+              "cpu": cpu, "converged": s.converged, "c": s.contact_fraction,
+              "bytes": peak / grid.npoints}
     if boundary == "free":
         field = np.random.default_rng(comm.rank).random(grid.local_shape)
         pairs = [_timed(comm, lambda: body.displacement(field))[1] for _ in range(6)]
@@ -93,9 +98,9 @@ def worker(shape, size, path, boundary, controls):
         depth = problem.top_height - grid.sum(s.gap + h - u) / grid.npoints
         for name, control in (("indentation", petgap.Indentation(depth)),
                               ("mean-gap", petgap.MeanGap(s.mean_gap))):
-            c, t = _timed(comm, lambda: petgap.solve(problem, control, tolerance=TOLERANCE))
-            result[name] = {"iterations": c.iterations, "time": t, "converged": c.converged,
-                            "load": c.mean_pressure}
+            c, t, cpu = _timed(comm, lambda: petgap.solve(problem, control, tolerance=TOLERANCE))
+            result[name] = {"iterations": c.iterations, "time": t, "cpu": cpu,
+                            "converged": c.converged, "load": c.mean_pressure}
     if comm.rank == 0:
         print("RESULT " + json.dumps(result), flush=True)
 
@@ -154,9 +159,9 @@ def main():
     print(f"load {LOAD} E*, KKT {TOLERANCE}; H = 0.8, lambda_min = 32 dx, lambda_max = Lx/2, "
           f"h0' = 0.1, pixels {pixel[0]:g} x {pixel[1]:g}; times in s; floor pairs of FFTW-MPI; "
           f"pair: the free operator's pruned pair")
-    header = ("map", "ranks", "boundary", "iterations", "applications", "solve s", "ms/it",
-              "floor n^2", "floor (2n)^2", "pair", "pair / floor n^2", "time ratio",
-              "iteration ratio", "B/pt", "c")
+    header = ("map", "ranks", "boundary", "iterations", "applications", "solve s", "CPU s",
+              "ms/it", "floor n^2", "floor (2n)^2", "pair", "pair / floor n^2", "time ratio",
+              "CPU ratio", "iteration ratio", "B/pt", "c")
     print(" | ".join(header))
     for shape in shapes:
         size = (shape[0] * pixel[0], shape[1] * pixel[1])
@@ -174,13 +179,15 @@ def main():
                     continue
                 ms = lambda v: "-" if v is None else f"{v * 1e3:.1f} ms"
                 pair = r.get("pair")
-                ratios = ("-", "-")
+                ratios = ("-", "-", "-")
                 if boundary == "free" and periodic is not None:
                     ratios = (f"{r['time'] / periodic['time']:.2f}",
+                              f"{r['cpu'] / periodic['cpu']:.2f}",
                               f"{r['iterations'] / periodic['iterations']:.2f}")
                 print(" | ".join(str(v) for v in (
                     name, ranks, boundary, r["iterations"], r["applications"],
-                    f"{r['time']:.3f}", f"{1e3 * r['time'] / max(r['iterations'], 1):.1f}",
+                    f"{r['time']:.3f}", f"{r['cpu']:.3f}",
+                    f"{1e3 * r['time'] / max(r['iterations'], 1):.1f}",
                     ms(small), ms(large), ms(pair),
                     "-" if pair is None or small is None else f"{pair / small:.2f}",
                     *ratios, f"{r['bytes']:.0f}", f"{r['c']:.4f}")), flush=True)
@@ -188,10 +195,11 @@ def main():
                     if control in r:
                         c = r[control]
                         print(f"{name} | {ranks} | free, {control} | {c['iterations']} | - | "
-                              f"{c['time']:.3f} | {1e3 * c['time'] / max(c['iterations'], 1):.1f}"
-                              f" | - | - | - | - | {c['time'] / r['time']:.2f} (of free load) | "
-                              f"{c['iterations'] / r['iterations']:.2f} | - | P0 {c['load']:.6f}",
-                              flush=True)
+                              f"{c['time']:.3f} | {c['cpu']:.3f} | "
+                              f"{1e3 * c['time'] / max(c['iterations'], 1):.1f} | - | - | - | - | "
+                              f"{c['time'] / r['time']:.2f} (of free load) | "
+                              f"{c['cpu'] / r['cpu']:.2f} | {c['iterations'] / r['iterations']:.2f}"
+                              f" | - | P0 {c['load']:.6f}", flush=True)
         if args.tamaas and shape[0] == shape[1]:
             from contact import tamaas_python
             n = shape[0]
@@ -202,9 +210,9 @@ def main():
                 print(f"{name} | 1 | Tamaas dcfft failed: {text[-1500:]}")
                 continue
             t = json.loads(text.split("TAMAAS ", 1)[1].splitlines()[0])
-            print(f"{name} | 1 | Tamaas dcfft | - | - | {t['time']:.3f} | - | - | - | - | - | "
-                  f"{t['time'] / free['time'] if free else float('nan'):.1f} (Tamaas / free) | "
-                  f"- | - | {t['contact_fraction']:.4f}", flush=True)
+            print(f"{name} | 1 | Tamaas dcfft | - | - | {t['time']:.3f} | - | - | - | - | - | - |"
+                  f" {t['time'] / free['time'] if free else float('nan'):.1f} (Tamaas / free) | "
+                  f"- | - | - | {t['contact_fraction']:.4f}", flush=True)
 
 
 if __name__ == "__main__":
