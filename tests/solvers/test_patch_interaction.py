@@ -15,7 +15,7 @@ from mpi4py import MPI
 
 from petgap.mechanics.free_half_space import FreeHalfSpace, influence_coefficients
 from petgap.mechanics.half_space import ElasticHalfSpace
-from petgap.mechanics.problem import ContactProblem, Load, MeanGap
+from petgap.mechanics.problem import ContactProblem, Indentation, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers import _contact_set as _cs
 from petgap.solvers import patch_interaction as patch_interaction_module
@@ -157,6 +157,19 @@ def test_the_interaction_reaches_the_same_state_sooner(comm):
     local = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, interaction_block=0))
     assert_same_state_sooner(problem, local, polonsky_keer(problem, control, SolverSettings(tolerance=1e-9)),
                              1e-9)
+
+
+@pytest.mark.parametrize("control", ["load", "indentation"])
+def test_the_free_interaction_reaches_the_same_state_sooner(comm, control):
+    """On a free map of 1024^2 (32 blocks a side), under load and under indentation."""
+    grid = Grid((1024, 1024), comm=comm, planner="estimate")
+    h = self_affine(grid, 0.8, 32.0, 512.0, rms_slope=0.1, seed=1)
+    problem = ContactProblem(grid, h, FreeHalfSpace(grid, E_STAR))
+    control = (Load(0.002 * 0.1 * E_STAR) if control == "load"
+               else Indentation(problem.top_height - problem.mean_height))
+    local = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, interaction_block=0))
+    far = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9))
+    assert_same_state_sooner(problem, local, far, 1e-9)
 
 
 def test_no_interaction_under_mean_gap_control(comm):
