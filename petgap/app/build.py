@@ -216,10 +216,11 @@ BYTES_PER_POINT_PRESSURE = 56
 BYTES_PER_POINT_PRESSURE_SINGLE = 36
 BYTES_PER_POINT_SOLVE = 80
 BYTES_PER_POINT_SURFACE = 40
-#: The same for a free boundary: the hard wall adds the padded cell's FFT buffers and
-#: kernel (docs/benchmarks.md, "Free boundary beside periodic"); adhesion solves on the
-#: cell, four times the map's points.
-BYTES_PER_POINT_FREE = 200
+#: The same for a free boundary: the hard wall adds the pruned transform's buffer and
+#: kernel and the free coarse levels (74-89 bytes per point in all, docs/benchmarks.md,
+#: "Free boundary beside periodic"); adhesion solves on the cell, four times the map's
+#: points.
+BYTES_PER_POINT_FREE = 110
 BYTES_PER_POINT_FREE_ADHESIVE = 4 * BYTES_PER_POINT_SOLVE + BYTES_PER_POINT_FREE
 #: The most points of a rank's (padded) slab: the kernels index it with 32-bit integers.
 MAX_SLAB_POINTS = 2**31 - 1

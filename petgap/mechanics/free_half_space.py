@@ -24,32 +24,51 @@ Conventions (those of :mod:`petgap.mechanics.half_space`)
 * ``u = C * p`` is a linear (not circular) convolution over the ``nx x ny``
   map, evaluated exactly by zero padding (Hockney 1970): ``p`` is embedded in a
   ``2 nx x 2 ny`` periodic cell whose kernel holds ``C`` at every offset the
-  map can see, ``|i| < nx`` and ``|j| < ny``; then one forward and one inverse
-  FFT-MPI transform of the padded cell, and a multiplication by the kernel's
-  transform (real: ``C`` is even in ``x`` and ``y``), give ``u`` on the map.
+  map can see, ``|i| < nx`` and ``|j| < ny``; then a forward and an inverse
+  transform of the padded cell, and a multiplication by the kernel's transform
+  (real: ``C`` is even in ``x`` and ``y``), give ``u`` on the map.
+* The kernel's transform is a 2D DCT-I of ``C`` at the offsets ``0 .. nx`` and
+  ``0 .. ny`` (the transform of an even sequence), unnormalised, the inverse's
+  ``1 / (4 nx ny)`` folded in (:func:`padded_symbol`).
 
-Cost: an application moves the map's rows to the padded cell's slabs and back
-(:func:`petgap.parallel.collective.move_rows`, one ``Alltoallv`` each way) and
-transforms four times as many points as the periodic operator on the map.
+Cost: the padded transform is pruned
+(:class:`petgap.parallel._fftw_mpi.PaddedConvolutionPlans`): the ``y``
+transforms, the transposes and the row passes see the map's ``nx`` rows only,
+in the map's own slab decomposition (no rows move to another), and only the
+``x`` transforms, in cache, span the cell.  ``(p, C p)`` comes from the forward
+half by Parseval (``p`` is zero outside the map), so that a conjugate-gradient
+step length pays for the inverse half only when it needs the field
+(:meth:`FreeHalfSpace.begin_sparse`).
 
 The stiffness ``K = C^{-1}`` has no such fast form.  The pressure solver needs
 ``K`` only as its preconditioner (an approximate inverse of ``C`` on the
-contact set), and there the periodic stiffness on the map's own grid serves:
-restricted to the contact set, ``C`` and the periodic compliance differ by the
-images' smooth field, which leaves the edges -- the part that needs
-preconditioning -- alike.  So ``apply_sparse(..., inverse=False)`` and
-``apply_in_buffer(inverse=False)`` apply the periodic stiffness, and
-:meth:`FreeHalfSpace.pressure` refuses; solvers that need the exact ``K``
+contact set), and there the half-space's stiffness ``E* |q| / 2`` on the map
+alone serves: restricted to the contact set, ``C`` and the compliance of that
+stiffness differ by a smooth field and by the discretisation, which leaves the
+edges -- the part that needs preconditioning -- alike.  Applied on the map's
+own periodic grid it would couple the map's opposite edges as neighbours (its
+kernel is short, ``1 / r^3``, but nearest neighbours across the seam are what
+it couples most), so it is applied on a cell :data:`MARGIN` pixels larger than
+the map, by the same pruned plans: zeros beyond the map's far edges, as the
+free body has no material pressed there.  So ``apply_sparse(...,
+inverse=False)`` and ``apply_in_buffer(inverse=False)`` apply that stiffness,
+and :meth:`FreeHalfSpace.pressure` refuses; solvers that need the exact ``K``
 (the gap formulation, TAO's bound-constrained methods) do not run on a free
-boundary (:func:`petgap.solvers.dispatch.solve` says so).
+map itself (:func:`petgap.solvers.dispatch.solve` sends the gap solvers to its
+padded cell).
 """
 import numpy as np
 from mpi4py import MPI
 
 from petgap.mechanics.half_space import ElasticHalfSpace
-from petgap.parallel.collective import move_rows
-from petgap.parallel.grid import Grid
-from petgap.parallel.log import OPERATOR_EVENT, event
+from petgap.parallel.grid import Grid, row_blocks
+from petgap.parallel.log import OPERATOR_EVENT, OPERATOR_HALF_EVENT, event
+
+
+#: Pixels of zeros beyond the map's far edges on the cell of the preconditioning stiffness
+#: (:func:`margin_cell`): its kernel falls like ``1 / r^3``, so the map's opposite edges,
+#: neighbours on the map's own periodic grid, barely couple across this margin.
+MARGIN = 16
 
 
 def influence_coefficients(x, y, dx, dy, contact_modulus=1.0):
@@ -62,18 +81,31 @@ def influence_coefficients(x, y, dx, dy, contact_modulus=1.0):
     ``dx dy / (pi E* r)``.
     """
     x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-
-    def primitive(s, t):
-        # s asinh(t / |s|) + t asinh(s / |t|), each term 0 where its divisor is
-        with np.errstate(divide="ignore", invalid="ignore"):
-            a = np.where(s != 0, s * np.arcsinh(t / np.abs(s)), 0.0)
-            b = np.where(t != 0, t * np.arcsinh(s / np.abs(t)), 0.0)
-        return a + b
-
     hx, hy = dx / 2, dy / 2
-    total = (primitive(x + hx, y + hy) - primitive(x - hx, y + hy)
-             - primitive(x + hx, y - hy) + primitive(x - hx, y - hy))
+    total = (_primitive(x + hx, y + hy) - _primitive(x - hx, y + hy)
+             - _primitive(x + hx, y - hy) + _primitive(x - hx, y - hy))
     return total / (np.pi * contact_modulus)
+
+
+def _primitive(s, t):
+    """``s asinh(t / |s|) + t asinh(s / |t|)``, each term 0 where its divisor is."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where(s != 0, s * np.arcsinh(t / np.abs(s)), 0.0)
+        b = np.where(t != 0, t * np.arcsinh(s / np.abs(t)), 0.0)
+    return a + b
+
+
+def influence_grid(i0, i1, j0, j1, dx, dy, contact_modulus=1.0):
+    """:func:`influence_coefficients` at the offsets ``(i dx, j dy)``, ``i0 <= i < i1``,
+    ``j0 <= j < j1``: the primitive once per pixel corner, differenced.
+
+    Neighbouring pixels share their corners, so a block of offsets needs the
+    primitive at a quarter of the points the pointwise formula evaluates it at.
+    """
+    xs = (np.arange(i0, i1 + 1) - 0.5) * dx
+    ys = (np.arange(j0, j1 + 1) - 0.5) * dy
+    f = _primitive(xs[:, None], ys[None, :])
+    return (f[1:, 1:] - f[:-1, 1:] - f[1:, :-1] + f[:-1, :-1]) / (np.pi * contact_modulus)
 
 
 def padded_kernel(cell, contact_modulus):
@@ -98,14 +130,92 @@ def padded_kernel(cell, contact_modulus):
     return kernel
 
 
+def _dct1(a):
+    """The DCT-I along the last axis, unnormalised: the transform of the even sequence
+    ``a[0], .., a[n], a[n-1], .., a[1]`` (real), at its ``n + 1`` distinct frequencies."""
+    even = np.concatenate([a, a[..., -2:0:-1]], axis=-1)
+    return np.fft.rfft(even, axis=-1).real
+
+
+def padded_symbol(grid, contact_modulus):
+    """The transform of ``C`` on the map's ``2 nx x 2 ny`` padded cell, on this rank's lines.
+
+    Returns ``(local_n1, nx + 1)`` doubles: line ``ky`` (the r2c half plane of the
+    cell's ``2 ny``, lines as :meth:`petgap.parallel.grid.Grid.zero_padded_plans`
+    splits them) at ``kx = 0 .. nx`` (even in ``kx``), unnormalised.  ``C`` is even in
+    ``x`` and ``y``, so its transform is a DCT-I along ``y`` of each row of offsets
+    ``0 .. ny``, then along ``x`` of offsets ``0 .. nx``; the map's rows are transposed
+    by double-precision plans whatever the grid's precision, and row ``nx``, which no
+    rank holds, is made by every rank.  Collective.
+    """
+    nx, ny, dx, dy = grid.nx, grid.ny, grid.dx, grid.dy
+    plans = grid.zero_padded_plans(planner="estimate", precision="double")
+    first, count = grid.x_slice.start, grid.local_shape[0]
+    rows = plans.rows[:count * (ny + 1)].reshape(count, ny + 1)
+    for block in row_blocks(count, ncols=ny + 1):
+        rows[block] = _dct1(influence_grid(first + block.start, first + block.stop, 0, ny + 1,
+                                           dx, dy, contact_modulus))
+    plans.transpose()
+    lo, n1 = plans.local_1_start, plans.local_n1
+    lines = plans.lines[:n1 * nx].reshape(n1, nx)
+    last = _dct1(influence_grid(nx, nx + 1, 0, ny + 1, dx, dy, contact_modulus)[0])[lo:lo + n1]
+    symbol = np.empty((n1, nx + 1))
+    for block in row_blocks(n1, ncols=2 * nx):
+        symbol[block] = _dct1(np.concatenate([lines[block].real, last[block, None]], axis=1))
+    return symbol
+
+
+def _indices(pidx):
+    """Flat padded-slab indices as the compiled plans take them (int32, no copy if so)."""
+    return np.asarray(pidx, dtype=np.int32)
+
+
+def fft_size(n):
+    """The smallest ``2^a 3^b 5^c 7^d >= n``: a length FFTW transforms fast."""
+    best = 1 << max(int(n) - 1, 0).bit_length()
+    p7 = 1
+    while p7 < best:
+        p5 = p7
+        while p5 < best:
+            p3 = p5
+            while p3 < best:
+                m = p3
+                while m < n:
+                    m *= 2
+                best = min(best, m)
+                p3 *= 3
+            p5 *= 5
+        p7 *= 7
+    return best
+
+
+def margin_cell(grid, margin=None):
+    """The cell on which the preconditioning stiffness is applied: the map with at least
+    ``margin`` (:data:`MARGIN`) pixels of zeros beyond its far edges, FFT-friendly."""
+    margin = MARGIN if margin is None else margin
+    return (min(fft_size(grid.nx + margin), 2 * grid.nx),
+            min(fft_size(grid.ny + margin), 2 * grid.ny))
+
+
+def stiffness_symbol(grid, plans, cell, contact_modulus):
+    """``E* |q| / 2`` on the lines ``plans`` hold of the periodic ``cell`` with ``grid``'s
+    pixels, ``(local_n1, cx // 2 + 1)``, divided by ``cx cy``; ``q = 0`` gives 0."""
+    cx, cy = cell
+    lo, n1 = plans.local_1_start, plans.local_n1
+    qx = 2 * np.pi * np.arange(cx // 2 + 1) / (cx * grid.dx)
+    qy = 2 * np.pi * np.arange(lo, lo + n1) / (cy * grid.dy)
+    return contact_modulus / (2.0 * cx * cy) * np.hypot(qy[:, None], qx[None, :])
+
+
 class FreeHalfSpace:
     """The infinite elastic half-space under pressures on a finite map.
 
     Same interface as :class:`~petgap.mechanics.half_space.ElasticHalfSpace`
     where the operator exists: :meth:`displacement` and ``apply_sparse`` /
-    ``apply_in_buffer`` with ``inverse=True`` are the exact compliance; with
-    ``inverse=False`` they are the periodic stiffness, a preconditioner (module
-    docstring).  ``periodic`` is False.
+    ``apply_in_buffer`` / ``begin_sparse`` with ``inverse=True`` are the exact
+    compliance; with ``inverse=False`` they are the preconditioning stiffness, the
+    half-space's stiffness on the map alone (module docstring).  ``periodic`` is
+    False.
 
     Parameters
     ----------
@@ -115,30 +225,43 @@ class FreeHalfSpace:
     contact_modulus : float
         ``E*``, positive.
 
-    Collective: builds a ``2 nx x 2 ny`` grid on ``grid``'s communicator with
-    the same FFTW planner, and transforms the kernel once.
+    Collective: plans the pruned transforms of both operators on ``grid``'s
+    communicator with its FFTW planner, and transforms ``C`` once.
     """
 
     periodic = False
-    #: ``C`` is applied in the map's precision (``apply_sparse``): a whole-slab result
-    #: stays in ``grid.real``, in double.
+    #: both operators run in the map's precision (``apply_sparse``): a whole-slab result
+    #: goes to ``grid.padded``, in the grid's precision.
     transforms_in_single = False
-    #: no ``begin_sparse``: a solver applies the operator whole (``apply_sparse``)
-    splits_transforms = False
+    #: ``begin_sparse`` gives ``(t, C t)`` from the forward half of the pruned transform
+    splits_transforms = True
 
     def __init__(self, grid, contact_modulus=1.0):
         self._periodic = ElasticHalfSpace(grid, contact_modulus)
         self.grid = grid
         self.contact_modulus = self._periodic.contact_modulus
-        nx, ny = grid.nx, grid.ny
-        self.cell = Grid((2 * nx, 2 * ny), size=(2 * grid.Lx, 2 * grid.Ly), comm=grid.comm,
-                         planner=grid.planner, wisdom=grid.wisdom)
-        cell = self.cell
-        # the inverse transform's 1 / (4 nx ny) folded in
-        self._kernel = padded_kernel(cell, self.contact_modulus)
-        self._kernel /= cell.npoints
-        self._rows = (cell.x_slice.start, min(cell.x_slice.stop, nx))  # map rows held here
+        compliance = grid.zero_padded_plans()
+        symbol = padded_symbol(grid, self.contact_modulus)
+        symbol /= 4 * grid.npoints   # the inverse transform's 1 / (4 nx ny)
+        compliance.set_kernel(symbol)
+        cell = margin_cell(grid)
+        stiffness = grid.zero_padded_plans(cell, buffers=(compliance.rows, compliance.lines))
+        stiffness.set_kernel(stiffness_symbol(grid, stiffness, cell, self.contact_modulus))
+        #: the pruned plans of ``C`` (True) and of the stiffness (False), on shared buffers
+        self._plans = {True: compliance, False: stiffness}
+        self._cell = None
+        self._begun = None   # the plans whose half-made transform finish completes
         self._applications = 0
+
+    @property
+    def cell(self):
+        """The map's ``2 nx x 2 ny`` padded cell as a grid (made on first use: the
+        solvers on the gap run there, :mod:`petgap.solvers.free_boundary`).  Collective."""
+        if self._cell is None:
+            grid = self.grid
+            self._cell = Grid((2 * grid.nx, 2 * grid.ny), size=(2 * grid.Lx, 2 * grid.Ly),
+                              comm=grid.comm, planner=grid.planner, wisdom=grid.wisdom)
+        return self._cell
 
     def on_grid(self, grid):
         """The same body under a map on another grid (a coarse start's)."""
@@ -146,58 +269,93 @@ class FreeHalfSpace:
 
     @property
     def applications(self):
-        """Applications of the compliance or of the preconditioning stiffness so far."""
-        return self._applications + self._periodic.applications
+        """Applications of the compliance or of the preconditioning stiffness so far, in
+        transform pairs (a begin and :meth:`finish` count a half each)."""
+        return self._applications
+
+    def _use(self, inverse):
+        """The plans of ``C`` (``inverse``) or of the stiffness, about to run: the buffers
+        they share lose any half-made transform."""
+        self._begun = None
+        return self._plans[bool(inverse)]
 
     def _compliance(self, field, out):
         """``out <- C * field`` on this rank's rows of the map (``out`` may be ``field``)."""
-        grid, cell = self.grid, self.cell
-        lo, hi = self._rows
+        plans = self._use(True)
         self._applications += 1
         with event(OPERATOR_EVENT):
-            cell.real[...] = 0.0
-            for row, piece in move_rows(grid.comm, field, grid.x_slice.start, lo, max(hi, lo)):
-                cell.real[row - lo:row - lo + len(piece), :grid.ny] = piece
-            cell.forward()
-            cell.fourier *= self._kernel
-            cell.backward()
-            held = cell.real[:max(hi - lo, 0), :grid.ny]
-            start, stop = grid.x_slice.start, grid.x_slice.stop
-            for row, piece in move_rows(grid.comm, held, lo, start, stop):
-                out[row - start:row - start + len(piece)] = piece
+            plans.apply(field, out)
         return out
 
     def apply_in_buffer(self, inverse=False):
         """Apply ``C`` (``inverse=True``) or the preconditioning stiffness to ``grid.real``, in place."""
-        if not inverse:
-            return self._periodic.apply_in_buffer(inverse=False)
-        return self._compliance(self.grid.real, self.grid.real)
+        plans = self._use(inverse)
+        self._applications += 1
+        with event(OPERATOR_EVENT):
+            plans.apply(self.grid.real, self.grid.real)
+        return self.grid.real
+
+    def _in_precision(self, values):
+        """``values`` in the grid's precision (the operators run in it, whatever is asked)."""
+        return np.asarray(values, dtype=self.grid.dtype)
 
     def apply_sparse(self, pidx, values, inverse=False, out=None, gathered=None,
                      precision=None):
         """:meth:`ElasticHalfSpace.apply_sparse <petgap.mechanics.half_space.ElasticHalfSpace.apply_sparse>`
-        with ``C`` for ``inverse=True`` (the map's padded FFT buffer is scratch).
+        with ``C`` (``inverse=True``) or the preconditioning stiffness, to ``out``,
+        ``gathered``, or ``grid.padded``.
 
-        ``C`` is applied in the map's precision whatever ``precision`` asks:
-        ``values`` and ``gathered`` are converted on the way in and out."""
-        if not inverse:
-            return self._periodic.apply_sparse(pidx, values, inverse=False, out=out,
-                                               gathered=gathered, precision=precision)
+        Both run in the map's precision whatever ``precision`` asks: ``values`` and
+        ``gathered`` are converted on the way in and out."""
         grid = self.grid
-        padded = grid.padded
-        padded[...] = 0.0
-        padded.reshape(-1)[pidx] = values
-        self._compliance(grid.real, grid.real)
-        if gathered is not None:
-            gathered[...] = padded.reshape(-1)[pidx]
-        elif out is not None:
-            out[:, :grid.ny] = grid.real
+        plans = self._use(inverse)
+        pidx, values = _indices(pidx), self._in_precision(values)
+        self._applications += 1
+        with event(OPERATOR_EVENT):
+            if gathered is None:
+                plans.apply_sparse(pidx, values, out=grid.padded if out is None else out)
+            elif gathered.dtype == grid.dtype:
+                plans.apply_sparse(pidx, values, gathered=gathered)
+            else:
+                result = np.empty(len(pidx), dtype=grid.dtype)
+                plans.apply_sparse(pidx, values, gathered=result)
+                np.copyto(gathered, result, casting="same_kind")
+
+    def begin_sparse(self, pidx, values, inverse=False, precision=None):
+        """This rank's part of ``(t, C t)`` (``inverse=True``, or of the stiffness's form)
+        from the forward half of the pruned transform, the field left half-made for
+        :meth:`finish`; in the map's precision.  Each half counts half an application."""
+        plans = self._use(inverse)
+        self._applications += 0.5
+        with event(OPERATOR_HALF_EVENT):
+            total = plans.begin_sparse(_indices(pidx), self._in_precision(values))
+        self._begun = plans
+        return total
+
+    def begin_in_buffer(self, inverse=False):
+        """:meth:`begin_sparse` of the field in ``grid.real``."""
+        plans = self._use(inverse)
+        self._applications += 0.5
+        with event(OPERATOR_HALF_EVENT):
+            total = plans.begin(self.grid.real)
+        self._begun = plans
+        return total
+
+    def finish(self, precision=None):
+        """The field of the last begin into the FFT buffer ``grid.padded``.  Collective."""
+        if self._begun is None:
+            raise RuntimeError("no half-made transform to finish: a begin was not the last "
+                               "use of the operators")
+        plans, self._begun = self._begun, None
+        self._applications += 0.5
+        with event(OPERATOR_HALF_EVENT):
+            plans.end(self.grid.padded)
 
     def displacement(self, pressure, out=None):
         """Displacement ``u = C p`` on the map under the pressure ``p`` (mean included)."""
         if out is None:
-            out = np.empty(self.grid.local_shape)
-        return self._compliance(np.ascontiguousarray(pressure, dtype=float), out)
+            out = np.empty(self.grid.local_shape, dtype=self.grid.dtype)
+        return self._compliance(np.ascontiguousarray(pressure, dtype=self.grid.dtype), out)
 
     def pressure(self, displacement, out=None):
         """Not available: ``C`` has no fast inverse (module docstring)."""
@@ -209,9 +367,12 @@ class FreeHalfSpace:
         return self._periodic.point_stiffness()
 
     def complementary_energy(self, pressure):
-        """``(1/2) sum_x dx dy p(x) u(x)`` with ``u = C p`` (all ranks; one application)."""
-        u = self.displacement(pressure)
-        local = float(np.vdot(pressure, u))
+        """``(1/2) sum_x dx dy p(x) u(x)`` with ``u = C p``, by Parseval from the forward
+        half of the transform (all ranks)."""
+        plans = self._use(True)
+        field = np.ascontiguousarray(pressure, dtype=self.grid.dtype)
+        local = plans.begin(field)
+        plans.half_made = False
         return 0.5 * self.grid.pixel_area * self.grid.comm.allreduce(local)
 
 

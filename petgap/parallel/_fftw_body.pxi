@@ -611,6 +611,445 @@ cdef class ConvolutionPlans:
             fftw_free(self.factor)
 
 
+#: Bytes of rows or lines the padded convolution transforms at a time in a buffer that
+#: stays in cache (at most BLOCK_ROWS of them, at least one).
+cdef enum:
+    CACHE_BLOCK_BYTES = 1 << 18
+
+
+cdef inline void _cache_block_sizes(Py_ssize_t total, Py_ssize_t width_bytes,
+                                    int sizes[2]) noexcept:
+    """Rows per cache block for rows of ``width_bytes``, and the last block's remainder.
+
+    ``sizes[0]`` rows of at most :data:`CACHE_BLOCK_BYTES` together (1 to ``BLOCK_ROWS``,
+    at most ``total``); ``sizes[1]`` the last, partial block's rows, or 0.
+    """
+    cdef Py_ssize_t block = max(1, min(<Py_ssize_t>BLOCK_ROWS,
+                                       <Py_ssize_t>CACHE_BLOCK_BYTES // max(width_bytes, 1)))
+    sizes[0] = <int>min(block, total)
+    sizes[1] = <int>(total % block) if total > block else 0
+
+
+cdef class PaddedConvolutionPlans:
+    """``u = k * p`` over an ``nx x ny`` map, by zero padding to a ``cx x cy`` periodic cell, pruned.
+
+    A linear convolution of the map with a kernel ``k`` that is even in ``x`` and
+    ``y`` is the circular convolution on a cell large enough that no point of the
+    map sees another through the cell's images: ``2 nx x 2 ny`` for a kernel of
+    every offset the map holds (Hockney's padding; the free half-space's
+    compliance), less for a kernel that falls off fast (a stiffness).  On the
+    cell, the rows beyond the map's are zero and so is the end of each row, and
+    all output off the map is discarded.  The 2D transform taken apart the way
+    FFTW-MPI builds it (:class:`ConvolutionPlans`) lets each stage see only what
+    is not zero or not discarded:
+
+    1. r2c transforms along ``y`` of length ``cy`` on the map's ``nx`` rows only,
+       each row zero-filled in a buffer held in cache, in the map's own slab
+       decomposition (no rows move to another);
+    2. a global transpose of these ``nx x (cy // 2 + 1)`` values;
+    3. per Fourier line (``ky``), the ``cx``-point transform along ``x`` of the
+       line's ``nx`` values and the zeros after them, the multiplication by the
+       kernel's transform, and the inverse transform, a few lines at a time in
+       cache, keeping only the map's ``nx`` outputs;
+    4. the transpose back, and c2r transforms of the map's ``nx`` rows, keeping
+       each row's first ``ny`` outputs.
+
+    Against the cell's full transform pair, stages 1, 2 and 4 move and transform
+    ``nx / cx`` of the data; stage 3 transforms every line of the cell (every
+    wavevector of the cell carries the product), but in cache, reading and
+    writing ``nx / cx`` of it.
+
+    The form ``(p, k * p)`` needs the forward half only (by Parseval: ``p`` is
+    zero off the map), so :meth:`begin_sparse` stops after the forward ``x``
+    transforms without keeping them, and :meth:`end`, if the field is needed
+    after all, takes stage 3 from the transposed rows, which stay in the lines
+    buffer: a begin costs stages 1-2 and half of 3, an end the rest.
+
+    Parameters
+    ----------
+    comm : mpi4py.MPI.Comm
+    nx, ny : int
+        The map's shape; ``nx`` is the distributed axis.
+    cx, cy : int
+        The cell's shape, at least the map's.
+    local_n0, local_n1, local_1_start : int
+        The map's rows here (FFTW-MPI's blocks of ``nx``), and the Fourier lines here
+        (of ``cy // 2 + 1``; may be 0): :func:`local_size_transposed` of ``(nx, cy)``.
+    width : int
+        Row length of the caller's fields (a padded slab's ``2 (ny // 2 + 1)``, or
+        ``ny``): flat indices and whole fields are in rows of ``width``, the map's
+        ``ny`` values first.
+    rows, lines : arrays of :data:`COMPLEX_DTYPE`, ``alloc_local`` values each
+        The rows' ``y`` transforms and the same transposed; the same array for
+        in-place transposes (half the memory, and less traffic).  Scratch, owned by
+        the caller.
+    planner : str
+        FFTW planner effort; measuring overwrites the buffers.
+
+    The kernel's transform (:meth:`set_kernel`) is real and even in ``x``: line
+    ``j`` holds it at ``kx = 0 .. cx // 2``, divided by ``cx cy`` (the inverse
+    transform's normalisation).
+    """
+    cdef fftw_plan transpose_fwd
+    cdef fftw_plan transpose_bwd
+    cdef fftw_plan rows_fwd[2]    # in place on `block`: a full block of rows, the rest
+    cdef fftw_plan rows_bwd[2]
+    cdef fftw_plan lines_fwd[2]   # in place on `line`
+    cdef fftw_plan lines_bwd[2]
+    cdef real_t *block            # nrows[0] rows of 2 (cy // 2 + 1) reals
+    cdef fftw_complex *line       # nlines[0] lines of cx complex values
+    cdef fftw_complex *rows_data
+    cdef fftw_complex *lines_data
+    cdef const double *kernel_data
+    cdef Py_ssize_t nx, ny, cx, cy, nyc, ln0, width
+    cdef int nrows[2]
+    cdef int nlines[2]
+    cdef object comm, kernel
+    #: the buffers (for :meth:`transpose`'s caller) and the Fourier lines held here
+    cdef readonly object rows, lines
+    cdef readonly Py_ssize_t local_n1, local_1_start
+    #: True between a begin and :meth:`end`; every other use of the plans clears it
+    cdef public bint half_made
+
+    def __cinit__(self):
+        self.half_made = False
+        self.transpose_fwd = self.transpose_bwd = NULL
+        for k in range(2):
+            self.rows_fwd[k] = self.rows_bwd[k] = NULL
+            self.lines_fwd[k] = self.lines_bwd[k] = NULL
+        self.block = NULL
+        self.line = NULL
+        self.kernel_data = NULL
+
+    def __init__(self, MPI.Comm comm, Py_ssize_t nx, Py_ssize_t ny, Py_ssize_t cx,
+                 Py_ssize_t cy, Py_ssize_t local_n0, Py_ssize_t local_n1,
+                 Py_ssize_t local_1_start, Py_ssize_t width, cnp.ndarray rows,
+                 cnp.ndarray lines, str planner="measure"):
+        if planner not in PLANNER_FLAGS:
+            raise ValueError(f"planner={planner!r} is not one of {sorted(PLANNER_FLAGS)}")
+        for name, a in (("rows", rows), ("lines", lines)):
+            if a.dtype != COMPLEX_DTYPE or not a.flags.c_contiguous:
+                raise TypeError(f"{name} buffer must be C-contiguous "
+                                f"{np.dtype(COMPLEX_DTYPE).name}")
+        if cx < nx or cy < ny or nx < 1 or ny < 1:
+            raise ValueError(f"a {cx} x {cy} cell does not hold a {nx} x {ny} map")
+        if local_n0 <= 0 or local_n1 < 0 or width < ny:
+            raise ValueError("every rank needs a row of the map, and rows of at least ny values")
+        self.nyc = cy // 2 + 1
+        if rows.size < local_n0 * self.nyc or lines.size < local_n1 * nx:
+            raise ValueError("the row or line buffer is too small for this rank's part")
+        self.comm, self.rows, self.lines = comm, rows, lines
+        self.nx, self.ny, self.cx, self.cy = nx, ny, cx, cy
+        self.ln0, self.width = local_n0, width
+        self.local_n1, self.local_1_start = local_n1, local_1_start
+        _cache_block_sizes(local_n0, 2 * self.nyc * sizeof(real_t), self.nrows)
+        _cache_block_sizes(local_n1, cx * sizeof(fftw_complex), self.nlines)
+        cdef unsigned flags = PLANNER_FLAGS[planner]
+        cdef int n_y = <int>cy, n_x = <int>cx
+        cdef int row_width = <int>(2 * self.nyc), ncomplex = <int>self.nyc
+        cdef int *nrows = self.nrows
+        cdef int *nlines = self.nlines
+        cdef MPI_Comm mcomm = comm.ob_mpi
+        self.rows_data = <fftw_complex *>cnp.PyArray_DATA(rows)
+        self.lines_data = <fftw_complex *>cnp.PyArray_DATA(lines)
+        self.block = <real_t *>fftw_malloc(nrows[0] * row_width * sizeof(real_t))
+        self.line = <fftw_complex *>fftw_malloc(max(nlines[0], 1) * n_x * sizeof(fftw_complex))
+        if self.block == NULL or self.line == NULL:
+            raise MemoryError("no memory for a block of rows")
+        cdef bint ok = True
+        with nogil:
+            self.transpose_fwd = fftw_mpi_plan_many_transpose(
+                nx, ncomplex, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
+                <real_t *>self.rows_data, <real_t *>self.lines_data, mcomm, flags)
+            self.transpose_bwd = fftw_mpi_plan_many_transpose(
+                ncomplex, nx, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
+                <real_t *>self.lines_data, <real_t *>self.rows_data, mcomm, flags)
+            for k in range(2):
+                if nrows[k] > 0:
+                    self.rows_fwd[k] = fftw_plan_many_dft_r2c(
+                        1, &n_y, nrows[k], self.block, NULL, 1, row_width,
+                        <fftw_complex *>self.block, NULL, 1, ncomplex, flags)
+                    self.rows_bwd[k] = fftw_plan_many_dft_c2r(
+                        1, &n_y, nrows[k], <fftw_complex *>self.block, NULL, 1, ncomplex,
+                        self.block, NULL, 1, row_width, flags | FFTW_DESTROY_INPUT)
+                    ok = ok and self.rows_fwd[k] != NULL and self.rows_bwd[k] != NULL
+                if nlines[k] > 0:
+                    self.lines_fwd[k] = fftw_plan_many_dft(
+                        1, &n_x, nlines[k], self.line, NULL, 1, n_x, self.line, NULL, 1, n_x,
+                        FFTW_FORWARD, flags)
+                    self.lines_bwd[k] = fftw_plan_many_dft(
+                        1, &n_x, nlines[k], self.line, NULL, 1, n_x, self.line, NULL, 1, n_x,
+                        FFTW_BACKWARD, flags)
+                    ok = ok and self.lines_fwd[k] != NULL and self.lines_bwd[k] != NULL
+        if not ok or self.transpose_fwd == NULL or self.transpose_bwd == NULL:
+            raise RuntimeError(f"FFTW-MPI could not plan the convolution of a {nx} x {ny} map "
+                               f"on a {cx} x {cy} cell")
+
+    def set_kernel(self, const double[:, ::1] kernel):
+        """The kernel's transform on this rank's lines, ``(local_n1, cx // 2 + 1)``, kept by
+        reference."""
+        if kernel.shape[0] != self.local_n1 or kernel.shape[1] != self.cx // 2 + 1:
+            raise ValueError(f"the kernel has shape {tuple(kernel.shape)[:2]}, the lines here "
+                             f"need ({self.local_n1}, {self.cx // 2 + 1})")
+        self.kernel = kernel
+        self.kernel_data = &kernel[0, 0] if self.local_n1 > 0 else NULL
+
+    def transpose(self):
+        """The rows buffer's ``(local_n0, cy // 2 + 1)`` values to the lines buffer, transposed
+        (what a kernel's transform can be made with).  Collective."""
+        self.half_made = False
+        with nogil:
+            fftw_execute(self.transpose_fwd)
+
+    cdef bint _rows_sparse(self, const index_t[::1] pidx,
+                           const real_t[::1] values) noexcept nogil:
+        """Stage 1 for a field given at the flat indices ``pidx`` (rows of ``width``).
+
+        Returns False if ``pidx`` is not sorted ascending inside this rank's rows and
+        the map's columns (the rows are transformed all the same, so that the
+        collective stage after it runs on every rank).
+        """
+        cdef Py_ssize_t ns = pidx.shape[0], w = self.width, w2 = 2 * self.nyc
+        cdef Py_ssize_t i0 = 0, k = 0, m, base, end, p, r
+        cdef int which
+        cdef bint ok = True
+        while i0 < self.ln0:
+            m = min(<Py_ssize_t>self.nrows[0], self.ln0 - i0)
+            which = 0 if m == self.nrows[0] else 1
+            base = i0 * w
+            end = base + m * w
+            memset(self.block, 0, m * w2 * sizeof(real_t))
+            while k < ns and pidx[k] < end:
+                p = pidx[k] - base
+                r = p // w
+                if p < 0 or p - r * w >= self.ny or (k > 0 and pidx[k] <= pidx[k - 1]):
+                    ok = False  # unsorted, negative, or off the map's columns
+                    break
+                self.block[r * w2 + p - r * w] = values[k]
+                k += 1
+            self._rows_forward(i0, m, which)
+            i0 += self.nrows[0]
+        return ok and k == ns
+
+    cdef void _rows_dense(self, const real_t *field, Py_ssize_t stride) noexcept nogil:
+        """Stage 1 for a whole field (this rank's rows, ``stride`` apart, the map's ``ny``
+        columns first)."""
+        cdef Py_ssize_t i0 = 0, m, r, ny = self.ny, w2 = 2 * self.nyc
+        cdef int which
+        while i0 < self.ln0:
+            m = min(<Py_ssize_t>self.nrows[0], self.ln0 - i0)
+            which = 0 if m == self.nrows[0] else 1
+            for r in range(m):
+                memcpy(self.block + r * w2, field + (i0 + r) * stride, ny * sizeof(real_t))
+                memset(self.block + r * w2 + ny, 0, (w2 - ny) * sizeof(real_t))
+            self._rows_forward(i0, m, which)
+            i0 += self.nrows[0]
+
+    cdef inline void _rows_forward(self, Py_ssize_t i0, Py_ssize_t m, int which) noexcept nogil:
+        """The block's rows transformed along ``y`` in place, then to the rows buffer."""
+        fftw_execute(self.rows_fwd[which])
+        memcpy(self.rows_data + i0 * self.nyc, self.block, m * self.nyc * sizeof(fftw_complex))
+
+    cdef double _lines_pass(self, bint form) noexcept nogil:
+        """Stage 3 on the transposed rows in the lines buffer.
+
+        With ``form``, only the forward transforms, the lines buffer left as it was,
+        and returns this rank's part of ``sum_q k_q |p_q|^2`` over the cell's full
+        plane (each ``ky`` line but ``0`` and an even ``cy``'s ``cy / 2`` stands for
+        two), accumulated in double: by Parseval, ``(p, k * p)`` over the map, since
+        ``p`` is zero off it.  Without, the transforms, the kernel and the inverse
+        transforms, the map's part back to the lines buffer.
+        """
+        cdef Py_ssize_t j0 = 0, j, g, m, nx = self.nx, n = self.cx
+        cdef int which
+        cdef double total = 0.0, weight
+        while j0 < self.local_n1:
+            m = min(<Py_ssize_t>self.nlines[0], self.local_n1 - j0)
+            which = 0 if m == self.nlines[0] else 1
+            for j in range(m):
+                memcpy(self.line + j * n, self.lines_data + (j0 + j) * nx,
+                       nx * sizeof(fftw_complex))
+                memset(self.line + j * n + nx, 0, (n - nx) * sizeof(fftw_complex))
+            fftw_execute(self.lines_fwd[which])
+            if form:
+                for j in range(m):
+                    g = self.local_1_start + j0 + j
+                    weight = 1.0 if g == 0 or 2 * g == self.cy else 2.0
+                    total = total + weight * self._line_form(j0 + j, <real_t *>(self.line + j * n))
+                j0 += self.nlines[0]
+                continue
+            for j in range(m):
+                self._multiply_line(j0 + j, <real_t *>(self.line + j * n))
+            fftw_execute(self.lines_bwd[which])
+            for j in range(m):
+                memcpy(self.lines_data + (j0 + j) * nx, self.line + j * n,
+                       nx * sizeof(fftw_complex))
+            j0 += self.nlines[0]
+        return total
+
+    cdef double _line_form(self, Py_ssize_t j, const real_t *s) noexcept nogil:
+        """``sum_kx k |s|^2`` of line ``j`` (``cx`` values at ``s``), the kernel even in ``kx``."""
+        cdef const double *kern = self.kernel_data + j * (self.cx // 2 + 1)
+        cdef Py_ssize_t i, n = self.cx, half = self.cx // 2
+        cdef double total = _norm2(s) * kern[0]
+        for i in range(1, half + 1):   # kx and -kx together (an even cx's Nyquist once)
+            total = total + kern[i] * (_norm2(s + 2 * i)
+                                       + (_norm2(s + 2 * (n - i)) if n - i != i else 0.0))
+        return total
+
+    cdef void _multiply_line(self, Py_ssize_t j, real_t *s) noexcept nogil:
+        """Line ``j`` (``cx`` values at ``s``) times the kernel, even in ``kx``."""
+        cdef const double *kern = self.kernel_data + j * (self.cx // 2 + 1)
+        cdef Py_ssize_t i, n = self.cx, half = self.cx // 2
+        cdef double f
+        for i in range(half + 1):
+            f = kern[i]
+            s[2 * i] = <real_t>(s[2 * i] * f)
+            s[2 * i + 1] = <real_t>(s[2 * i + 1] * f)
+        for i in range(half + 1, n):
+            f = kern[n - i]
+            s[2 * i] = <real_t>(s[2 * i] * f)
+            s[2 * i + 1] = <real_t>(s[2 * i + 1] * f)
+
+    cdef void _back(self, real_t *out, Py_ssize_t stride, const index_t *pidx, Py_ssize_t ns,
+                    real_t *gathered) noexcept nogil:
+        """Stage 4: the transpose back and the rows' inverse along ``y``, the map's part to
+        ``out`` (rows ``stride`` apart, their first ``ny`` columns), or with ``gathered``
+        to the ``ns`` points ``pidx``."""
+        cdef Py_ssize_t i0 = 0, m, r, k = 0, base, end, p
+        cdef Py_ssize_t ny = self.ny, w = self.width, w2 = 2 * self.nyc
+        cdef int which
+        fftw_execute(self.transpose_bwd)
+        while i0 < self.ln0:
+            m = min(<Py_ssize_t>self.nrows[0], self.ln0 - i0)
+            which = 0 if m == self.nrows[0] else 1
+            memcpy(self.block, self.rows_data + i0 * self.nyc, m * self.nyc * sizeof(fftw_complex))
+            fftw_execute(self.rows_bwd[which])
+            if gathered == NULL:
+                for r in range(m):
+                    memcpy(out + (i0 + r) * stride, self.block + r * w2, ny * sizeof(real_t))
+            else:
+                base = i0 * w
+                end = base + m * w
+                while k < ns and pidx[k] < end:
+                    p = pidx[k] - base
+                    r = p // w
+                    gathered[k] = self.block[r * w2 + p - r * w]
+                    k += 1
+            i0 += self.nrows[0]
+
+    cdef Py_ssize_t _rows_of(self, const real_t[:, :] field, str name) except -1:
+        """The row stride of ``field`` (in values), checked against this rank's part."""
+        if field is None:
+            raise ValueError(f"a whole {name} is needed (this rank's rows of the map)")
+        if (field.shape[0] != self.ln0 or field.shape[1] < self.ny
+                or field.strides[1] != sizeof(real_t) or field.strides[0] % sizeof(real_t)):
+            raise ValueError(f"the {name} has shape {tuple(field.shape)[:2]}, this rank's "
+                             f"part of the map is ({self.ln0}, {self.ny}) in rows of "
+                             f"contiguous values")
+        if self.kernel is None:
+            raise RuntimeError("no kernel: set_kernel first")
+        return field.strides[0] // sizeof(real_t)
+
+    cdef int _check_sparse(self, const index_t[::1] pidx, const real_t[::1] values,
+                           real_t[::1] gathered) except -1:
+        if values.shape[0] != pidx.shape[0] or (gathered is not None
+                                                and gathered.shape[0] != pidx.shape[0]):
+            raise ValueError("pidx, values and gathered must have the same length")
+        if self.kernel is None:
+            raise RuntimeError("no kernel: set_kernel first")
+        return 0
+
+    def apply(self, const real_t[:, :] field, real_t[:, :] out):
+        """``out <- k * field`` (this rank's rows; ``out`` may be ``field``).  Collective."""
+        cdef Py_ssize_t fs = self._rows_of(field, "field"), os = self._rows_of(out, "out")
+        self.half_made = False
+        with nogil:
+            self._rows_dense(&field[0, 0], fs)
+            fftw_execute(self.transpose_fwd)
+            self._lines_pass(False)
+            self._back(&out[0, 0], os, NULL, 0, NULL)
+
+    def apply_sparse(self, const index_t[::1] pidx, const real_t[::1] values,
+                     real_t[:, :] out=None, real_t[::1] gathered=None):
+        """``k * x`` of a field zero but at the sorted flat indices ``pidx`` (rows of
+        ``width``): to ``out``, or with ``gathered`` only at ``pidx``.  Collective."""
+        self._check_sparse(pidx, values, gathered)
+        cdef Py_ssize_t os = 0, ns = pidx.shape[0]
+        cdef bint ok
+        cdef real_t *g = NULL
+        cdef real_t *o = NULL
+        cdef const index_t *ip = NULL
+        if gathered is None:
+            os = self._rows_of(out, "out")
+            o = &out[0, 0]
+        elif ns > 0:
+            g, ip = &gathered[0], &pidx[0]
+        self.half_made = False
+        with nogil:
+            ok = self._rows_sparse(pidx, values)
+            fftw_execute(self.transpose_fwd)
+            self._lines_pass(False)
+            if o != NULL or g != NULL:
+                self._back(o, os, ip, ns, g)
+            else:
+                fftw_execute(self.transpose_bwd)   # collective: every rank takes part
+        if not ok:
+            raise ValueError("pidx must be sorted ascending, inside this rank's rows and the "
+                             "map's columns")
+
+    def begin_sparse(self, const index_t[::1] pidx, const real_t[::1] values):
+        """The forward half of :meth:`apply_sparse`: this rank's part of ``(x, k * x)`` (by
+        Parseval); :meth:`end` gives the field.  Collective."""
+        self._check_sparse(pidx, values, None)
+        cdef bint ok
+        cdef double total
+        with nogil:
+            ok = self._rows_sparse(pidx, values)
+            fftw_execute(self.transpose_fwd)
+            total = self._lines_pass(True)
+        self.half_made = ok
+        if not ok:
+            raise ValueError("pidx must be sorted ascending, inside this rank's rows and the "
+                             "map's columns")
+        return total
+
+    def begin(self, const real_t[:, :] field):
+        """:meth:`begin_sparse` of a whole field."""
+        cdef Py_ssize_t fs = self._rows_of(field, "field")
+        cdef double total
+        with nogil:
+            self._rows_dense(&field[0, 0], fs)
+            fftw_execute(self.transpose_fwd)
+            total = self._lines_pass(True)
+        self.half_made = True
+        return total
+
+    def end(self, real_t[:, :] out):
+        """The rest after a begin: ``k * x`` to ``out``.  Collective."""
+        cdef Py_ssize_t os = self._rows_of(out, "out")
+        if not self.half_made:
+            raise RuntimeError("no half-made convolution to finish: a begin was not the last "
+                               "use of these plans")
+        self.half_made = False
+        with nogil:
+            self._lines_pass(False)
+            self._back(&out[0, 0], os, NULL, 0, NULL)
+
+    def __dealloc__(self):
+        _destroy(&self.transpose_fwd)
+        _destroy(&self.transpose_bwd)
+        for k in range(2):
+            _destroy(&self.rows_fwd[k])
+            _destroy(&self.rows_bwd[k])
+            _destroy(&self.lines_fwd[k])
+            _destroy(&self.lines_bwd[k])
+        if self.block != NULL:
+            fftw_free(self.block)
+        if self.line != NULL:
+            fftw_free(self.line)
+
+
 def weighted_power(const complex_t[:, ::1] c, const double[::1] qx,
                    const double[::1] qy, const double[::1] wrow, int power):
     """``sum_j wrow[j] sum_i |c[j, i]|**2 |q|**power`` over this rank's Fourier slab.

@@ -307,6 +307,42 @@ class Grid:
                             f"{self.dtype} ({self.precision} precision)")
         self._convolution.end(out)
 
+    def zero_padded_plans(self, cell=None, planner=None, precision=None, buffers=None):
+        """Plans of a linear convolution over this grid's map by zero padding to a larger cell.
+
+        ``cell``: the periodic cell's shape, ``(2 nx, 2 ny)`` by default (Hockney's).
+
+        :class:`petgap.parallel._fftw_mpi.PaddedConvolutionPlans` in this grid's precision,
+        on a buffer of their own (the map's rows transformed along ``y``, transposed in
+        place: half the padded cell's, and faster than two) and this grid's rows; fields and flat indices are in rows of the
+        padded slab's width, like :attr:`padded`'s.  The caller gives the kernel
+        (``set_kernel``).  Collective; planned with this grid's effort and wisdom
+        unless ``planner`` says otherwise; ``precision`` other than the grid's (a
+        double kernel for single plans) goes without wisdom.  ``buffers``: the
+        ``(rows, lines)`` of other such plans of a cell at least as large, to share
+        (each use of either plans then overwrites the other's; planning too).
+        """
+        planner = self.planner if planner is None else planner
+        precision = self.precision if precision is None else precision
+        binding = BINDINGS[precision]
+        cx, cy = (2 * self.nx, 2 * self.ny) if cell is None else cell
+        alloc, ln0, l0s, ln1, l1s = _fftw_mpi.local_size_transposed(self.comm, self.nx, cy)
+        if (ln0, l0s) != (self.local_shape[0], self.x_slice.start):
+            raise DecompositionError(f"the padded rows of a {self.nx} x {self.ny} map are split "
+                                     f"unlike the map's ({ln0} from {l0s} here)")
+        if buffers is None:
+            rows = lines = _aligned_empty(alloc, binding.COMPLEX_DTYPE)
+        else:
+            rows, lines = buffers   # the plans check that they are large enough
+        wisdom = self.wisdom and planner != "estimate" and precision == self.precision
+        if wisdom:
+            self._load_wisdom()
+        plans = binding.PaddedConvolutionPlans(self.comm, self.nx, self.ny, cx, cy, ln0, ln1,
+                                               l1s, self.padded.shape[1], rows, lines, planner)
+        if wisdom:
+            self._save_wisdom()
+        return plans
+
     def _spoil(self):
         """A transform is about to use the FFT buffers: a half-made convolution in them (this
         grid's, or that of the other grid on the same buffers) is lost."""

@@ -703,7 +703,7 @@ def changed_points(const unsigned char[:, ::1] mask, const unsigned char[:, ::1]
 
 def add_windows(kappa, Py_ssize_t first_row, Py_ssize_t nx, const index_t[::1] rows,
                 const index_t[::1] cols, const signed char[::1] signs,
-                const double[:, ::1] table):
+                const double[:, ::1] table, bint wrap=True):
     """``kappa += sign K(x - y)`` over the window ``table`` around each point ``y``.
 
     ``kappa`` is this rank's slab, whose first row is the global row
@@ -711,21 +711,23 @@ def add_windows(kappa, Py_ssize_t first_row, Py_ssize_t nx, const index_t[::1] r
     global coordinates of the changed points (every rank's, in the same order
     on every rank), ``signs`` +1 where a point entered S and -1 where it left;
     ``table[W + di, W + dj]`` is the stiffness kernel ``K`` at the offset
-    ``(di, dj)``, ``|di|, |dj| <= W``.  Rows and columns wrap periodically;
+    ``(di, dj)``, ``|di|, |dj| <= W``.  Rows and columns wrap periodically
+    (with ``wrap``; without, a window ends at the map's edges: a free boundary);
     the window must be narrower than the grid (``2 W + 1 <= nx, ny``), so that
     no point of it is visited twice.
     """
     if kappa.dtype == _FLOAT32:
-        _add_windows[float](0, kappa, first_row, nx, rows, cols, signs, table)
+        _add_windows[float](0, kappa, first_row, nx, rows, cols, signs, table, wrap)
     elif kappa.dtype == _FLOAT64:
-        _add_windows[double](0, kappa, first_row, nx, rows, cols, signs, table)
+        _add_windows[double](0, kappa, first_row, nx, rows, cols, signs, table, wrap)
     else:
         raise TypeError(f"add_windows: kappa is {kappa.dtype}, not float64 or float32")
 
 
 cdef object _add_windows(real_t kind, object kappa_, Py_ssize_t first_row, Py_ssize_t nx,
                          const index_t[::1] rows, const index_t[::1] cols,
-                         const signed char[::1] signs, const double[:, ::1] table):
+                         const signed char[::1] signs, const double[:, ::1] table,
+                         bint wrap):
     cdef real_t[:, ::1] kappa = kappa_
     cdef Py_ssize_t m = kappa.shape[0], n = kappa.shape[1], w = table.shape[0] // 2
     cdef Py_ssize_t k, di, dj, r, c
@@ -741,10 +743,14 @@ cdef object _add_windows(real_t kind, object kappa_, Py_ssize_t first_row, Py_ss
         for k in range(rows.shape[0]):
             s = signs[k]
             for di in range(-w, w + 1):
+                if not wrap and (rows[k] + di < 0 or rows[k] + di >= nx):
+                    continue
                 r = (rows[k] + di + nx) % nx - first_row
                 if r < 0 or r >= m:
                     continue
                 for dj in range(-w, w + 1):
+                    if not wrap and (cols[k] + dj < 0 or cols[k] + dj >= n):
+                        continue
                     c = (cols[k] + dj + n) % n
                     kappa[r, c] = <real_t>(<double>kappa[r, c] + s * table[w + di, w + dj])
 

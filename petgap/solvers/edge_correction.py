@@ -125,9 +125,9 @@ class EdgeCorrection:
     Parameters
     ----------
     half_space : ElasticHalfSpace or FreeHalfSpace
-        Whose stiffness (``apply_in_buffer(inverse=False)``: the periodic
-        stiffness, also on a free boundary, where it is the preconditioner) the
-        preconditioner applies.
+        Whose stiffness (``apply_in_buffer(inverse=False)``: on a free boundary the
+        preconditioner's, which does not reach across the map's edges, and neither
+        do the windows there) the preconditioner applies.
     mask : ndarray of uint8, shape ``grid.local_shape``
         The contact set's mask (:class:`petgap.solvers.contact_set.ContactSet`),
         read whenever :meth:`sums` is called.
@@ -194,7 +194,8 @@ class EdgeCorrection:
             _cs.add_windows(self.kappa, grid.x_slice.start, grid.nx,
                             np.ascontiguousarray(points[:, 0]),
                             np.ascontiguousarray(points[:, 1]),
-                            points[:, 2].astype(np.int8), self.table)
+                            points[:, 2].astype(np.int8), self.table,
+                            self.half_space.periodic)
             self._known.ravel()[local] = self.mask.ravel()[local]
         return None
 

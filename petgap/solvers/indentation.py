@@ -6,12 +6,21 @@ own, so the mean gap is reached as the depth of an
 :class:`~petgap.mechanics.problem.Indentation` solve
 (:func:`solve_mean_gap_by_indentation`).
 """
+import numpy as np
+from mpi4py import MPI
+
 from petgap.mechanics.problem import Indentation
+from petgap.solvers import coarse
 from petgap.solvers.contact_limits import touching_state
 from petgap.solvers.convergence import Timer
 from petgap.solvers.progress import outer_step
 from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.solvers.settings import SolverSettings
+
+#: Each solve before the last is converged to this share of the last mean-gap error
+#: (over ``h0``), or to the solve's tolerance where that is looser: a depth that secant
+#: steps will move needs its mean gap only to the accuracy the next step can use.
+TOLERANCE_SHARE = 0.01
 
 
 def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *,
@@ -23,17 +32,25 @@ def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *
     depth ``d`` of an :class:`~petgap.mechanics.problem.Indentation` solve.  The
     mean gap ``m(d) = mean(u) - mean(h) + max(h) - d`` falls with ``d`` at a slope
     between -1 (rigid) and 0, and is convex where the load grows faster than
-    the depth (Hertz: ``d^{3/2}``): from the rigid estimate ``u = 0``, which lies
-    below the answer since ``u >= 0`` under compression, secant steps through
-    the last two solves (the first with slope -1) stay below it and converge
-    from one side, each solve warm-started from the last.  Stops when
-    ``|m - g_bar| <= tolerance h0``; a solve that fails, or ``max_solves``
-    steps, ends it with ``converged=False`` and that reason.
+    the depth (Hertz: ``d^{3/2}``).  Secant steps through the last two solves
+    find ``d``, each solve warm-started from the last.  They start where the
+    same mean gap on the coarse start's grid (:mod:`petgap.solvers.coarse`, the
+    topography block-averaged) put the depth, at the slope its last steps found,
+    from its pressure prolonged: the depth is found level by level as the
+    pressure of a load solve is, and the fine grid takes a few steps from near
+    the answer.  Without a coarse grid (or a cold start asked off) the first
+    depth is the rigid estimate ``u = 0`` with slope -1, which lies below the
+    answer since ``u >= 0`` under compression.  The solves before the last are
+    inexact, to :data:`TOLERANCE_SHARE` of the last mean-gap error (the first to
+    the coarse tolerance).  Stops when ``|m - g_bar| <= tolerance h0`` after a
+    solve to the tolerance; a solve that fails, or ``max_solves`` steps, ends it
+    with ``converged=False`` and that reason.
 
-    Returns the last solve's solution with ``control`` set to the mean gap and
-    iterations, operator applications and history summed over the solves.
+    Returns the last solve's solution with ``control`` set to the mean gap,
+    iterations, operator applications and history summed over the solves, and its
+    ``depth`` and the secant's last ``depth_slope``.
     """
-    tolerance, max_iterations = settings.tolerance, settings.max_iterations
+    tolerance = settings.tolerance
     g_bar = float(control.mean_gap)
     timer = Timer()
     reach = problem.top_height - problem.mean_height   # mean gap at first touch
@@ -44,38 +61,93 @@ def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *
         state.approach = reach - g_bar
         return state
     start_ops = problem.operator_applications
-    depth, previous = reach - g_bar, None
-    iterations, history, pressure, solves = 0, [], initial_pressure, 0
-    converged, reason = False, "max_solves"
-    while solves < max_solves:
-        solution = polonsky_keer(problem, Indentation(depth), settings.but(
-            max_iterations=max(max_iterations - iterations, 1), coarse_start=pressure is None),
-            initial_pressure=pressure, monitor=monitor)
-        solves += 1
-        iterations += solution.iterations
-        history.extend(solution.history)
-        excess = solution.mean_gap - g_bar
-        outer_step("the mean gap by the indentation", solves, max_solves, timer,
-                   f"mean gap off by {abs(excess) / problem.gap_scale:.3e} h0 (target "
-                   f"{tolerance:.0e}) after {solution.iterations} iterations")
-        if not solution.converged:
-            reason = solution.reason
-            break
-        if abs(excess) <= tolerance * problem.gap_scale:
-            converged, reason = True, "converged_kkt"
-            break
-        slope = -1.0
-        if previous is not None and depth != previous[0]:
-            slope = min((solution.mean_gap - previous[1]) / (depth - previous[0]), -1e-12)
-        previous = (depth, solution.mean_gap)
-        depth += excess / -slope
-        pressure = solution.pressure
-    solution.start = "; ".join(filter(None, [f"{solves} indentation solves to the mean gap, "
-                                             f"last depth {solution.control.depth:.6g}",
-                                             solution.start]))
+    depth, slope, pressure, description = reach - g_bar, -1.0, initial_pressure, ""
+    if initial_pressure is None and settings.coarse_start:
+        depth, slope, pressure, description = _coarse_depth(problem, control, settings, depth)
+    inner = max(tolerance, settings.coarse_tolerance)
+    loop = _Secant(problem, settings, monitor, g_bar, max_solves)
+    solution = loop.run(depth, slope, pressure, inner)
+    solution.start = "; ".join(filter(None, [
+        f"{loop.solves} indentation solves to the mean gap, last depth {loop.depth:.6g}",
+        description, solution.start]))
+    solution.depth, solution.depth_slope = loop.depth, loop.slope
     solution.control = control
-    solution.converged, solution.reason = converged, reason
-    solution.iterations, solution.history = iterations, history
+    solution.converged, solution.reason = loop.converged, loop.reason
+    solution.iterations, solution.history = loop.iterations, loop.history
     solution.operator_applications = problem.operator_applications - start_ops
     solution.wall_time = timer()
     return solution
+
+
+class _Secant:
+    """The secant steps on the depth, each an indentation solve warm from the last."""
+
+    def __init__(self, problem, settings, monitor, g_bar, max_solves):
+        self.problem, self.settings, self.monitor = problem, settings, monitor
+        self.g_bar, self.max_solves = g_bar, max_solves
+        self.iterations, self.history, self.solves = 0, [], 0
+        self.converged, self.reason = False, "max_solves"
+        self.depth, self.slope = None, -1.0
+        self.timer = Timer()
+
+    def run(self, depth, slope, pressure, inner):
+        """Solve from ``depth`` with the first step's ``slope``; the last solution."""
+        problem, settings, tolerance = self.problem, self.settings, self.settings.tolerance
+        previous = None
+        while self.solves < self.max_solves:
+            solution = polonsky_keer(problem, Indentation(depth), settings.but(
+                tolerance=inner, coarse_start=pressure is None,
+                max_iterations=max(settings.max_iterations - self.iterations, 1)),
+                initial_pressure=pressure, monitor=self.monitor)
+            self.solves += 1
+            self.iterations += solution.iterations
+            self.history.extend(solution.history)
+            self.depth, pressure = depth, solution.pressure
+            excess = solution.mean_gap - self.g_bar
+            outer_step("the mean gap by the indentation", self.solves, self.max_solves,
+                       self.timer, f"mean gap off by {abs(excess) / problem.gap_scale:.3e} h0 "
+                       f"(target {tolerance:.0e}) after {solution.iterations} iterations "
+                       f"to {inner:.0e}")
+            if not solution.converged:
+                self.reason = solution.reason
+                break
+            if abs(excess) <= tolerance * problem.gap_scale:
+                if inner <= tolerance:
+                    self.converged, self.reason = True, "converged_kkt"
+                    break
+                inner = tolerance   # the depth is found: its solve to the tolerance
+                continue
+            inner = max(tolerance, TOLERANCE_SHARE * abs(excess) / problem.gap_scale)
+            if previous is not None and depth != previous[0]:
+                slope = min((solution.mean_gap - previous[1]) / (depth - previous[0]), -1e-12)
+            self.slope = slope
+            previous = (depth, solution.mean_gap)
+            depth += excess / -slope
+        return solution
+
+
+def _coarse_depth(problem, control, settings, depth):
+    """``(depth, slope, pressure, description)`` from the same mean gap on the coarse grid.
+
+    The coarse problem is solved by this module to the coarse tolerance (from its
+    own coarse grid), and its pressure prolonged to the fine grid's scratch.  Where
+    there is no coarse grid, or the coarse solve failed, the rigid estimate
+    ``depth`` with slope -1 and no pressure.  Collective.
+    """
+    coarse_problem = coarse.coarse_problem(problem)
+    if coarse_problem is None:
+        return depth, -1.0, None, ""
+    solution = solve_mean_gap_by_indentation(coarse_problem, control, settings.but(
+        tolerance=max(settings.tolerance, settings.coarse_tolerance), coarse_start=True,
+        search_precision="double", preconditioned=True))
+    cgrid = coarse_problem.grid
+    description = (f"coarse {cgrid.nx}x{cgrid.ny}: {solution.iterations} iterations, "
+                   f"{solution.reason}")
+    finite = problem.grid.comm.allreduce(bool(np.isfinite(solution.pressure).all()),
+                                         op=MPI.LAND)
+    if not (solution.converged and finite):
+        return depth, -1.0, None, description + " (not used)"
+    factor = problem.grid.nx // cgrid.nx
+    pressure = coarse.prolong(cgrid.x_slice.start, problem.grid, solution.pressure, factor,
+                              coarse.is_whole(problem.grid, cgrid))
+    return solution.depth, solution.depth_slope, pressure, description

@@ -44,8 +44,9 @@ The term is smooth over whole blocks, and the solver's projection onto ``p >=
 0`` is not: the pressure solver applies it only once the contact set has nearly
 stopped changing, and withdraws it for a while when the residual rose after a
 step with it (:class:`petgap.solvers.preconditioners.PatchAdmission`; docs/design.md,
-"When the patch interaction applies").  The solver makes it under load control
-only (:class:`petgap.solvers.preconditioners.RestrictedStiffness` says why).
+"When the patch interaction applies").  The solver makes it under load control,
+and on a free map under indentation too
+(:class:`petgap.solvers.preconditioners.RestrictedStiffness` says why).
 
 Cost: one pass over ``S`` for the block sums, one to subtract ``V y``, an
 all-reduce of two coarse fields, and a few dozen transforms of the coarse grid,
@@ -55,12 +56,24 @@ ranks share the fine grid: beyond :data:`MAX_SIDE` blocks a side the blocks
 grow instead (at 16384^2, 256 blocks of 64 pixels).  Larger blocks model the
 far field more coarsely, but converge about as fast as 32-pixel blocks, and far
 faster than no term (docs/benchmarks.md, "The preconditioner's patch
-interaction").  Periodic cells only: on a free boundary
-the far field is a different operator.
+interaction").
+
+On a free boundary the far field is the free half-space's: ``F`` is the
+compliance of Love's uniformly loaded blocks (:func:`petgap.mechanics.free_half_space.influence_coefficients`
+with the blocks as pixels) over the map's blocks alone, a Toeplitz operator
+with no square root in closed form.  It is the restriction to the map of the
+circulant ``F_c`` on the ``2 mx x 2 my`` blocks of the padded cell (Hockney), whose
+symbol is positive, and since ``D`` and ``V^T g`` vanish off the map,
+``(F_c^{-1} + D)^{-1}`` solved on the cell and restricted to the map is
+``(F^{-1} + D)^{-1}`` (the Woodbury form of both has ``F`` only between
+restrictions to the map).  So the coarse system is solved on the padded cell,
+four times the blocks, with ``F_c^{1/2}`` by its symbol; its mean mode is not
+zero (a free map sinks under a mean pressure).
 """
 import numpy as np
 from mpi4py import MPI
 
+from petgap.mechanics.free_half_space import influence_coefficients
 from petgap.solvers import _contact_set as _cs
 
 #: Side of a block, in pixels, over which the far field is taken as constant.
@@ -97,30 +110,33 @@ class PatchInteraction:
         The share of ``kappa`` the preconditioner takes off (its edge correction).
     block : int
         Side of a block in pixels (:data:`BLOCK`).
+    periodic : bool
+        The far field of a periodic cell, or of a free map (module docstring).
 
     Use :func:`patch_interaction`, which returns None where the grid is too small.
     """
 
-    def __init__(self, grid, contact_modulus, theta, block=BLOCK):
+    def __init__(self, grid, contact_modulus, theta, block=BLOCK, periodic=True):
         self.grid = grid
         self.mx, self.my = blocks(grid.nx, block), blocks(grid.ny, block)
         self.share = 1.0 - float(theta)
-        # coarse wavenumbers; F = 2 / (E* |q|) divided by the coarse cell's area in pixels
-        qx = 2 * np.pi * np.fft.fftfreq(self.mx, d=grid.Lx / self.mx)
-        qy = 2 * np.pi * np.fft.rfftfreq(self.my, d=grid.Ly / self.my)
-        q = np.hypot(qx[:, None], qy[None, :])
         cell = (grid.nx / self.mx) * (grid.ny / self.my)
         #: pixels in a block (``block^2``, or more where the blocks grew beyond
         #: :data:`MAX_SIDE` a side)
         self.block_area = cell
-        symbol = np.zeros_like(q)
-        np.divide(2.0 / (contact_modulus * cell), q, out=symbol, where=q > 0)
-        self._root = np.sqrt(symbol)   # F^{1/2}
+        # F's symbol, divided by a block's area in pixels (block sums in, displacements out)
+        if periodic:
+            self.shape = (self.mx, self.my)
+            symbol = _periodic_symbol(grid, self.shape, contact_modulus)
+        else:
+            self.shape = (2 * self.mx, 2 * self.my)
+            symbol = _free_symbol(grid, self.shape, contact_modulus)
+        self._root = np.sqrt(symbol / cell)   # F^{1/2}
         #: coarse conjugate-gradient iterations of the last :meth:`solve`
         self.inner_iterations = 0
 
     def _half(self, x):
-        return np.fft.irfft2(np.fft.rfft2(x) * self._root, s=(self.mx, self.my))
+        return np.fft.irfft2(np.fft.rfft2(x) * self._root, s=self.shape)
 
     def sums(self, gS, kappa, idx):
         """``(w, d)``: the block sums ``V^T g`` and ``D`` over every rank.  Collective."""
@@ -135,9 +151,9 @@ class PatchInteraction:
 
     def solve(self, w, d):
         """``y = (F^{-1} + D)^{-1} w`` on the coarse grid (the same on every rank)."""
-        shape = (self.mx, self.my)
-        d = d.reshape(shape)
-        b = self._half(w.reshape(shape))
+        shape, on_map = self.shape, (slice(0, self.mx), slice(0, self.my))
+        d, w = self._on_cell(d), self._on_cell(w)
+        b = self._half(w)
         x = np.zeros(shape)
         r = b.copy()
         rr = bb = _dot(r, r)
@@ -153,13 +169,43 @@ class PatchInteraction:
             p += r
             k += 1
         self.inner_iterations = k
-        return self._half(x).ravel()
+        return np.ascontiguousarray(self._half(x)[on_map]).ravel()
+
+    def _on_cell(self, v):
+        """Block values ``v`` on the grid the coarse system is solved on (on a free map's
+        padded cell, zero off the map)."""
+        v = v.reshape(self.mx, self.my)
+        if v.shape == self.shape:
+            return v
+        cell = np.zeros(self.shape)
+        cell[:self.mx, :self.my] = v
+        return cell
 
     def subtract(self, zS, kappa, idx, y):
         """``zS -= V y`` on S (indices ``idx``)."""
         grid = self.grid
         _cs.subtract_blocks(zS, kappa, idx, grid.x_slice.start, grid.nx, grid.ny, self.mx,
                             self.my, y, self.share)
+
+
+def _periodic_symbol(grid, shape, contact_modulus):
+    """``2 / (E* |q|)`` on the periodic coarse grid of ``shape`` blocks (``q = 0`` gives 0)."""
+    qx = 2 * np.pi * np.fft.fftfreq(shape[0], d=grid.Lx / shape[0])
+    qy = 2 * np.pi * np.fft.rfftfreq(shape[1], d=grid.Ly / shape[1])
+    q = np.hypot(qx[:, None], qy[None, :])
+    symbol = np.zeros_like(q)
+    np.divide(2.0 / contact_modulus, q, out=symbol, where=q > 0)
+    return symbol
+
+
+def _free_symbol(grid, shape, contact_modulus):
+    """The transform of Love's block coefficients on the padded cell of ``shape`` blocks
+    (twice the map's a side), at offsets wrapped to at most the map's: real, positive."""
+    bx, by = 2 * grid.Lx / shape[0], 2 * grid.Ly / shape[1]
+    i, j = (np.fft.fftfreq(n, d=1.0 / n) for n in shape)
+    i[shape[0] // 2], j[shape[1] // 2] = shape[0] // 2, shape[1] // 2   # offset +m, not -m
+    c = influence_coefficients(i[:, None] * bx, j[None, :] * by, bx, by, contact_modulus)
+    return np.fft.rfft2(c).real
 
 
 def _dot(a, b):
@@ -171,12 +217,13 @@ def _dot(a, b):
 def patch_interaction(half_space, theta, block=BLOCK):
     """A :class:`PatchInteraction` for ``half_space``'s grid, or None where it is not made.
 
-    None on a free boundary and where the coarse grid would have fewer than
-    :data:`MIN_SIDE` blocks a side (``block = 0`` turns it off).
+    None where the coarse grid would have fewer than :data:`MIN_SIDE` blocks a side
+    (``block = 0`` turns it off); on a free boundary, the free map's far field.
     """
     grid = half_space.grid
-    if not block or not half_space.periodic:
+    if not block:
         return None
     if min(blocks(grid.nx, block), blocks(grid.ny, block)) < MIN_SIDE:
         return None
-    return PatchInteraction(grid, half_space.contact_modulus, theta, block)
+    return PatchInteraction(grid, half_space.contact_modulus, theta, block,
+                            periodic=half_space.periodic)

@@ -22,7 +22,7 @@ built from three parts, each an object here:
 * The patch interaction ``V y`` (:mod:`petgap.solvers.patch_interaction`): the far
   field by which contact patches press on each other, which the local stiffness
   cannot see, solved on a grid of blocks.  It keeps the condition number from growing
-  with the number of patches across a periodic cell.  It is smooth over whole
+  with the number of patches across a periodic cell or a free map.  It is smooth over whole
   blocks, and the projection onto ``p >= 0`` after each step is not: while ``S`` still
   moves, a step with it shifts the pressure of many small patches at once, which the
   projection clips.  So it enters only when the set has settled, under the rule of
@@ -241,8 +241,10 @@ class RestrictedStiffness:
         ``edge_correction`` (0 leaves the edge term out, and with it the patch
         interaction) and ``interaction_block`` (0 leaves the patch interaction out).
     load : bool
-        Load control: only there is the patch interaction made (under mean-gap control
-        at high contact fractions it costs more iterations than it saves).
+        Load control: on a periodic cell only there is the patch interaction made
+        (under mean-gap control at high contact fractions it costs more iterations than
+        it saves); on a free map also under indentation, where it takes the
+        iterations to about load control's.
     """
 
     def __init__(self, problem, mask, transforms, settings, load):
@@ -251,7 +253,7 @@ class RestrictedStiffness:
         self.comm, self.transforms, self.load = problem.grid.comm, transforms, load
         self.edge = EdgeCorrection(half_space, mask, theta) if theta > 0 else None
         self.patch = (patch_interaction(half_space, theta, settings.interaction_block)
-                      if self.edge is not None and load else None)
+                      if self.edge is not None and (load or not half_space.periodic) else None)
         self.admission = PatchAdmission(None if self.patch is None else self.patch.block_area)
 
     @property

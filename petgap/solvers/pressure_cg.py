@@ -35,7 +35,7 @@ while the edges settle.  In an iteration with the patch interaction in the
 preconditioner that is what works best: its steepest-descent steps are
 nearly Newton steps, and conjugacy kept across changes of ``S`` slows the
 final phase.  Without it (before the set has settled, under mean-gap control,
-on a free boundary, or with ``interaction_block = 0``), steepest descent is
+on grids below 1024^2, or with ``interaction_block = 0``), steepest descent is
 slow, and conjugacy is kept unless more than :data:`RESTART_FRACTION` of ``S``
 enters in one iteration: the few entering points perturb the subspace the
 directions were conjugate in, and the step's exact line search still minimises

@@ -6,7 +6,9 @@ from mpi4py import MPI
 
 import petgap
 from petgap.mechanics.free_half_space import (FreeHalfSpace, PaddedCellHalfSpace,
-                                               influence_coefficients)
+                                               influence_coefficients, influence_grid,
+                                               margin_cell, padded_kernel)
+from petgap.parallel.dottest import dottest
 from petgap.parallel.grid import Grid
 from petgap.surfaces.indenters import indenter
 
@@ -31,6 +33,15 @@ def test_influence_coefficients_limits():
     xs, ys = np.meshgrid(s * dx, s * dy, indexing="ij")
     near = np.mean(1 / np.hypot(2.0 - xs, 1.0 - ys)) * dx * dy / (np.pi * e)
     assert influence_coefficients(2.0, 1.0, dx, dy, e) == pytest.approx(near, rel=1e-5)
+
+
+def test_influence_grid_is_the_pointwise_formula():
+    """The corner-shared evaluation equals the pointwise one, negative offsets included."""
+    dx, dy, e = 0.7, 1.3, 2.5
+    grid = influence_grid(-5, 40, -3, 30, dx, dy, e)
+    i, j = np.meshgrid(np.arange(-5, 40), np.arange(-3, 30), indexing="ij")
+    pointwise = influence_coefficients(i * dx, j * dy, dx, dy, e)
+    np.testing.assert_allclose(grid, pointwise, rtol=1e-11)
 
 
 @pytest.mark.parametrize("shape", [(12, 10), (9, 7)])
@@ -59,6 +70,83 @@ def test_compliance_is_the_linear_convolution(comm, shape):
     assert energy == pytest.approx(0.5 * grid.pixel_area * np.sum(p * direct), rel=1e-12)
     with pytest.raises(NotImplementedError, match="displacements from pressures only"):
         half_space.pressure(u[grid.x_slice])
+
+
+def _full_padded(p, dx, dy, modulus):
+    """``C * p`` by the whole padded cell's transform pair (Hockney unpruned), on one rank."""
+    nx, ny = p.shape
+    cell = Grid((2 * nx, 2 * ny), size=(2 * nx * dx, 2 * ny * dy), comm=MPI.COMM_SELF,
+                planner="estimate", wisdom=False)
+    kernel = padded_kernel(cell, modulus)
+    cell.real[...] = 0.0
+    cell.real[:nx, :ny] = p
+    cell.forward()
+    cell.fourier *= kernel / cell.npoints
+    return cell.backward()[:nx, :ny].copy()
+
+
+@pytest.mark.parametrize("shape", [(16, 12), (9, 7), (7, 13)])
+def test_pruned_compliance_equals_the_full_padded_one(comm, shape):
+    """The pruned transform gives the whole padded cell's result to round-off, whole,
+    gathered and split into its halves (``begin_sparse`` / ``finish``), with the form
+    ``(t, C t)`` of the forward half; ``C`` and the stiffness pass the dot test."""
+    nx, ny = shape
+    grid = Grid(shape, size=(nx * 0.7, ny * 1.3), comm=comm, planner="estimate", wisdom=False)
+    body = FreeHalfSpace(grid, 2.0)
+    p = np.random.default_rng(1).random(shape)
+    p[p < 0.5] = 0.0
+    expected = _full_padded(p, grid.dx, grid.dy, 2.0)
+    tol = 1e-13 * np.abs(expected).max()
+    np.testing.assert_allclose(body.displacement(p[grid.x_slice]), expected[grid.x_slice],
+                               rtol=0, atol=tol)
+    mask = np.zeros(grid.padded.shape, bool)
+    mask[:, :ny] = p[grid.x_slice] > 0
+    pidx = np.flatnonzero(mask).astype(np.int32)
+    values = p[grid.x_slice][mask[:, :ny]]
+    form = comm.allreduce(body.begin_sparse(pidx, values, inverse=True))
+    assert form == pytest.approx(float(np.vdot(p, expected)), rel=1e-13)
+    before = body.applications
+    body.finish()
+    assert body.applications == before + 0.5
+    np.testing.assert_allclose(grid.real, expected[grid.x_slice], rtol=0, atol=tol)
+    with pytest.raises(RuntimeError, match="no half-made transform"):
+        body.finish()
+    dottest(grid, body.displacement)
+    dottest(grid, lambda x: _stiffness(grid, body, x))
+
+
+def test_the_stiffness_does_not_reach_across_the_map(comm):
+    """The preconditioning stiffness is the half-space's on the map alone: a unit gap at the
+    first row moves the last row by nothing the margin's kernel lets through, where the
+    map's periodic grid couples them as neighbours."""
+    grid = Grid((32, 24), comm=comm, planner="estimate", wisdom=False)
+    body = FreeHalfSpace(grid)
+    assert margin_cell(grid) == (48, 40)
+    unit = np.zeros(grid.shape)
+    unit[0, 5] = 1.0
+    free = _gather(comm, _stiffness(grid, body, unit[grid.x_slice]))
+    periodic = _gather(comm, _stiffness(grid, petgap.ElasticHalfSpace(grid), unit[grid.x_slice]))
+    assert abs(periodic[-1, 5]) > 0.2 and abs(free[-1, 5]) < 1e-3
+    assert free[1, 5] == pytest.approx(periodic[1, 5], rel=2e-2)
+
+
+def _stiffness(grid, body, x):
+    np.copyto(grid.real, x)
+    return body.apply_in_buffer(inverse=False).copy()
+
+
+def test_single_precision_free_half_space(comm):
+    """On a single-precision grid the compliance runs in 32 bits (a double kernel) and
+    agrees with double to single's rounding."""
+    shape = (20, 14)
+    p = np.random.default_rng(4).random(shape)
+    results = {}
+    for precision in ("double", "single"):
+        grid = Grid(shape, comm=comm, planner="estimate", wisdom=False, precision=precision)
+        u = FreeHalfSpace(grid).displacement(p[grid.x_slice])
+        assert u.dtype == grid.dtype
+        results[precision] = u
+    np.testing.assert_allclose(results["single"], results["double"], rtol=2e-6)
 
 
 def _hertz(comm, n=256, a=64.0, radius=1000.0):

@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from petgap.mechanics.free_half_space import FreeHalfSpace, influence_coefficients
 from petgap.mechanics.half_space import ElasticHalfSpace
-from petgap.mechanics.problem import ContactProblem, Load, MeanGap
+from petgap.mechanics.problem import ContactProblem, Indentation, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers import _contact_set as _cs
 from petgap.solvers import patch_interaction as patch_interaction_module
@@ -111,6 +112,26 @@ def test_the_coarse_solve_is_the_woodbury_middle(comm):
     assert far.inner_iterations > 0
 
 
+def test_the_free_coarse_solve_is_the_free_maps(comm):
+    """On a free map, ``(F^{-1} + D) y = w`` with ``F`` Love's block compliance over the
+    map's blocks alone (a dense direct sum, no transform, no images)."""
+    grid = Grid((96, 60), size=SIZE, comm=comm, planner="estimate")
+    far = PatchInteraction(grid, E_STAR, theta=0.6, block=12, periodic=False)
+    mx, my = far.mx, far.my
+    bx, by = SIZE[0] / mx, SIZE[1] / my
+    i, j = np.meshgrid(np.arange(mx), np.arange(my), indexing="ij")
+    f = influence_coefficients((i.ravel()[:, None] - i.ravel()[None, :]) * bx,
+                               (j.ravel()[:, None] - j.ravel()[None, :]) * by, bx, by,
+                               E_STAR) / far.block_area
+    rng = np.random.default_rng(12)
+    w, d = rng.standard_normal(mx * my), rng.random(mx * my) * 50
+    expected = np.linalg.solve(np.linalg.inv(f) + np.diag(d), w)
+    y = far.solve(w, d)
+    assert np.abs(y - expected).max() <= 1e-5 * np.abs(expected).max()
+    assert patch_interaction(FreeHalfSpace(Grid((1024, 1024), comm=comm, planner="estimate")),
+                             0.6).shape == (64, 64)
+
+
 def test_no_interaction_where_it_does_not_apply(comm):
     small = Grid((960, 1200), comm=comm, planner="estimate")
     assert MIN_SIDE * 32 > 960
@@ -136,6 +157,19 @@ def test_the_interaction_reaches_the_same_state_sooner(comm):
     local = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, interaction_block=0))
     assert_same_state_sooner(problem, local, polonsky_keer(problem, control, SolverSettings(tolerance=1e-9)),
                              1e-9)
+
+
+@pytest.mark.parametrize("control", ["load", "indentation"])
+def test_the_free_interaction_reaches_the_same_state_sooner(comm, control):
+    """On a free map of 1024^2 (32 blocks a side), under load and under indentation."""
+    grid = Grid((1024, 1024), comm=comm, planner="estimate")
+    h = self_affine(grid, 0.8, 32.0, 512.0, rms_slope=0.1, seed=1)
+    problem = ContactProblem(grid, h, FreeHalfSpace(grid, E_STAR))
+    control = (Load(0.002 * 0.1 * E_STAR) if control == "load"
+               else Indentation(problem.top_height - problem.mean_height))
+    local = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9, interaction_block=0))
+    far = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9))
+    assert_same_state_sooner(problem, local, far, 1e-9)
 
 
 def test_no_interaction_under_mean_gap_control(comm):
