@@ -25,19 +25,47 @@ import numpy as np
 # (points at the wall that are pulled off it).
 
 
-def gcg_open_sums(const double[:, ::1] pel, const double[:, ::1] g,
-                  const double[:, ::1] vp, bint adh):
-    """Returns ``(sum of grad over g > 0, count of g > 0)``: the multiplier estimate."""
+def gcg_gradient_sums(const double[:, ::1] pel, const double[:, ::1] g,
+                      const double[:, ::1] vp, bint adh, double lam_guess):
+    """The multiplier's and the free set's sums in one pass, F tested with a guessed ``lam_f``.
+
+    Returns ``(sum of grad over g > 0, count of g > 0)``, then
+    :func:`gcg_free_sums`'s four values with ``lam_f = lam_guess``, then
+    ``(below, above)``: the largest ``grad`` of the points at the wall counted in
+    F, and the smallest of those left out.  ``lam_f`` follows from the first two
+    sums once they are reduced over the ranks; the free sums hold for it exactly
+    (the same points, summed in the same order) when every wall point falls on
+    the same side of it as of the guess, i.e. when ``below + lam_f < 0 <=
+    above + lam_f`` (``grad + lam`` is monotone in ``grad``).
+    """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double s = 0.0
-    cdef long count = 0
+    cdef double gr, s = 0.0, sf = 0.0, gmax = -INFINITY, gmin = INFINITY
+    cdef double below = -INFINITY, above = INFINITY
+    cdef long count = 0, nf = 0
+    cdef bint free
     with nogil:
         for i in range(m):
             for j in range(n):
+                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
                 if g[i, j] > 0.0:
-                    s += pel[i, j] + (vp[i, j] if adh else 0.0)
+                    s += gr
                     count += 1
-    return s, count
+                    free = True
+                else:
+                    free = gr + lam_guess < 0.0
+                    if free:
+                        if gr > below:
+                            below = gr
+                    elif gr < above:
+                        above = gr
+                if free:
+                    sf += gr
+                    nf += 1
+                    if gr > gmax:
+                        gmax = gr
+                    if gr < gmin:
+                        gmin = gr
+    return s, count, sf, nf, gmax, gmin, below, above
 
 
 def gcg_free_sums(const double[:, ::1] pel, const double[:, ::1] g, const double[:, ::1] vp,
@@ -115,60 +143,56 @@ def gcg_precond_sums(const double[:, ::1] real, const double[:, ::1] pel,
 
 
 def gcg_direction(double[:, ::1] real, const double[:, ::1] pel, const double[:, ::1] g,
-                  const double[:, ::1] vp, bint adh, double[:, ::1] t, double lam_f,
-                  double zshift, double beta):
-    """``t = -(z - zshift) + beta t`` on F, 0 elsewhere (``z = real``); then ``real = t``."""
+                  const double[:, ::1] vp, const double[:, ::1] vpp, bint adh,
+                  double[:, ::1] t, double lam_f, double zshift, double beta, double lam,
+                  double divisor):
+    """``t = -(z - zshift) + beta t`` on F, 0 elsewhere (``z = real``); then ``real = t``.
+
+    Returns the pointwise part of the step's data along the new ``t``, in the
+    same pass: ``(sum v''(g) t^2, sum (grad + lam) t, max |t|)``.  ``v''`` is
+    ``vpp`` where the law fills that field, otherwise ``-v' / divisor`` (the
+    law's ``curvature_from_stress``: ``rho`` for the exponential, ``inf`` for a
+    law with ``v'' = 0``).  The elastic part ``t.K t`` needs the transform of
+    ``t`` (:func:`gcg_image_sum`, or by Parseval in the transform's forward half).
+    """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double gr, v
+    cdef double gr, v, e, curv = 0.0, slope = 0.0, tmax = 0.0
+    cdef bint second = vpp is not None
     with nogil:
         for i in range(m):
             for j in range(n):
-                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
+                e = vp[i, j] if adh else 0.0
+                gr = pel[i, j] + e
                 if g[i, j] > 0.0 or gr + lam_f < 0.0:
                     v = -(real[i, j] - zshift) + beta * t[i, j]
                 else:
                     v = 0.0
                 t[i, j] = v
                 real[i, j] = v
+                if v == 0.0:
+                    continue
+                if adh:
+                    if second:
+                        curv += vpp[i, j] * v * v
+                    else:
+                        curv -= (e / divisor) * v * v
+                    slope += (pel[i, j] + e + lam) * v
+                else:
+                    slope += (pel[i, j] + lam) * v
+                if fabs(v) > tmax:
+                    tmax = fabs(v)
+    return curv, slope, tmax
 
 
-def gcg_curvature(const double[:, ::1] real, const double[:, ::1] t, const double[:, ::1] pel,
-                  const double[:, ::1] g, const double[:, ::1] vp, const double[:, ::1] vpp,
-                  bint adh, double lam, double divisor):
-    """Returns ``(t.K t + sum v''(g) t^2, sum (grad + lam) t, max |t|, min over t < 0 of g / -t)``.
-
-    ``real`` holds ``K t``, or is None: then the first value leaves ``t.K t`` out
-    (the caller has it by Parseval).  ``v''`` is ``vpp`` where the law fills that
-    field, otherwise ``-v' / divisor`` (the law's ``curvature_from_stress``: ``rho``
-    for the exponential, ``inf`` for a law with ``v'' = 0``).  The last value is
-    the step at which the first free point would reach the wall.
-    """
-    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double tv, e, curv = 0.0, slope = 0.0, tmax = 0.0, reach = INFINITY
-    cdef bint image = real is not None
-    cdef bint second = vpp is not None
+def gcg_image_sum(const double[:, ::1] real, const double[:, ::1] t):
+    """Returns ``sum t (K t)`` with ``real`` holding ``K t``: where the transform has no halves."""
+    cdef Py_ssize_t i, j, m = t.shape[0], n = t.shape[1]
+    cdef double curv = 0.0
     with nogil:
         for i in range(m):
             for j in range(n):
-                tv = t[i, j]
-                if tv == 0.0:
-                    continue
-                if image:
-                    curv += tv * real[i, j]
-                if adh:
-                    e = vp[i, j]
-                    if second:
-                        curv += vpp[i, j] * tv * tv
-                    else:
-                        curv -= (e / divisor) * tv * tv
-                    slope += (pel[i, j] + e + lam) * tv
-                else:
-                    slope += (pel[i, j] + lam) * tv
-                if fabs(tv) > tmax:
-                    tmax = fabs(tv)
-                if tv < 0.0 and g[i, j] / -tv < reach:
-                    reach = g[i, j] / -tv
-    return curv, slope, tmax, reach
+                curv += t[i, j] * real[i, j]
+    return curv
 
 
 def gcg_step(double[:, ::1] g, const double[:, ::1] t, double tau):
@@ -286,7 +310,7 @@ def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const doub
     ``rhs += R r`` (times ``b^2``) of the residual written, and ``springs +=`` the
     same of the springs: ``edge`` per free neighbour along the row at a point at
     the wall, ``v''(g)`` elsewhere (``vpp``, or ``-v' / divisor`` where the law fills
-    no ``v''`` field, as in :func:`gcg_curvature`; nothing for the hard wall).
+    no ``v''`` field, as in :func:`gcg_direction`; nothing for the hard wall).
     """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef bint second = vpp is not None

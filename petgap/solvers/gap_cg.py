@@ -18,8 +18,8 @@ and named parts, each with its reason in its docstring:
 * :func:`_precondition`: ``z = P_F K^{-1} P_F r`` with the mean mode, and with
   ``two_level`` the coarse term of :mod:`petgap.solvers.gap_two_level`;
 * :func:`_beta`: the recurrence's ``beta``, Polak-Ribiere+ with ``two_level``;
-* :func:`_curvature` and :func:`_step_length`: the step along the direction,
-  its cap at the interaction's length scale and the non-convex case;
+* :func:`_direction` and :func:`_step_length`: the new direction, the step along
+  it, its cap at the interaction's length scale and the non-convex case;
 * :func:`_project_mean`: the projection onto ``{g >= 0, mean(g) = g_bar}``;
 * :func:`_advance`: the step, then the projection and a restart, or the
   recurrence ``p_el += tau K t``.
@@ -251,6 +251,32 @@ def _released_strongly(f, s, history):
     return f.comm.allreduce(strong, op=MPI.SUM) != s.n_open
 
 
+def _free_sums(f, s):
+    """``(sum_F grad, |F|, crossed)`` and ``(max_F grad, -min_F grad)``, reduced over the ranks.
+
+    Under mean-gap control ``F`` depends on ``P0_open`` (:func:`_multiplier`),
+    whose sums are reduced first: one pass makes both, testing ``F`` with the
+    last iteration's ``P0_open``, and says whether the new one puts any wall
+    point on the other side (:func:`petgap.solvers._kernels.gcg_gradient_sums`).
+    Only then is ``F`` summed again, so the sums are those of ``F`` at the new
+    ``P0_open`` in every case, in one pass over the slab most of the time.
+    ``crossed`` counts the points whose ``v'`` jumped (:func:`_multiplier`).
+    """
+    args = (f.pel, f.g, f.vp, f.adhesive)
+    if not f.load:
+        s_open, n_open, *free, below, above = _pass(_k.gcg_gradient_sums, *args, s.lam_f)
+        s_open, s.n_open, *sums = global_sums(f.comm, s_open, n_open, *free[:2], f.crossed)
+        s.lam_f = -s_open / s.n_open if s.n_open > 0 else 0.0
+        ext = np.array([free[2], -free[3], below, -above])
+        f.comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
+        if ext[2] + s.lam_f < 0.0 <= s.lam_f - ext[3]:
+            return sums, ext[:2]
+    free = _pass(_k.gcg_free_sums, *args, s.lam_f)
+    ext = np.array([free[2], -free[3]])
+    f.comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
+    return global_sums(f.comm, *free[:2], f.crossed), ext
+
+
 def _multiplier(f, s, history):
     """The free set's sums: ``P0`` (mean-gap control), whether to restart, and the residual.
 
@@ -267,22 +293,11 @@ def _multiplier(f, s, history):
     from the wall (:func:`_released_strongly`).  The count rides on the free
     set's reduction.
     """
-    comm = f.comm
-    if not f.load:
-        s_open, s.n_open = global_sums(comm, *_pass(_k.gcg_open_sums, f.pel, f.g, f.vp,
-                                                    f.adhesive))
-        s.lam_f = -s_open / s.n_open if s.n_open > 0 else 0.0
-    s_free, n_free, gmax, gmin = _pass(_k.gcg_free_sums, f.pel, f.g, f.vp, f.adhesive, s.lam_f)
-    if f.jumps:
-        s_free, s.n_free, crossed = global_sums(comm, s_free, n_free, f.crossed)
-        s.beta_ok = s.beta_ok and crossed == 0
-    else:
-        s_free, s.n_free = global_sums(comm, s_free, n_free)
+    (s_free, s.n_free, crossed), ext = _free_sums(f, s)
+    s.beta_ok = s.beta_ok and crossed == 0
     if s.beta_ok and not f.load and s.n_free > s.n_open:
         s.beta_ok = not _released_strongly(f, s, history)
         s.released += not s.beta_ok
-    ext = np.array([gmax, -gmin])
-    comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
     if not f.load:
         s.lam = -s_free / s.n_free if s.n_free > 0 else s.lam_f
     s.lam_free = -s_free / s.n_free if s.n_free > 0 else s.lam
@@ -372,25 +387,26 @@ def _beta(f, s, rz, zshift):
     return beta, zshift
 
 
-def _curvature(f, s):
-    """``(t.K t + sum v''(g) t^2, slope, max |t|)`` along the direction ``t``.
+def _direction(f, s, zshift, beta):
+    """The new direction ``t`` (from ``z`` in the FFT buffer) and ``(t.K t + sum v''(g) t^2,
+    slope, max |t|)`` along it.
 
-    The curvature needs ``K t`` only through ``t.K t``, which by Parseval the
-    forward half of the transform gives
+    ``t = -(z - zshift) + beta t`` on ``F``, 0 elsewhere; the pass that writes it
+    also sums the slope and the interaction's curvature along it.  The step
+    needs ``K t`` only through ``t.K t``, which by Parseval the forward half of
+    the transform gives
     (:meth:`petgap.mechanics.half_space.ElasticHalfSpace.begin_in_buffer`); the
     inverse half runs later only if ``p_el`` follows by the recurrence (a whole
     pair where the half-space has no halves).
     """
     lam = s.lam if f.load else 0.0
+    curv, slope, tmax = _pass(_k.gcg_direction, f.padded, f.pel, f.g, f.vp, f.vpp, f.adhesive,
+                              f.t, s.lam_f, zshift, beta, lam, f.divisor)
     if f.half_space.splits_transforms:
-        form = f.half_space.begin_in_buffer(inverse=False)
-        curv, slope, tmax, _ = _pass(_k.gcg_curvature, None, f.t, f.pel, f.g, f.vp, f.vpp,
-                                     f.adhesive, lam, f.divisor)
-        curv += form
+        curv += f.half_space.begin_in_buffer(inverse=False)
     else:
         f.half_space.apply_in_buffer(inverse=False)
-        curv, slope, tmax, _ = _pass(_k.gcg_curvature, f.padded, f.t, f.pel, f.g, f.vp, f.vpp,
-                                     f.adhesive, lam, f.divisor)
+        curv += _pass(_k.gcg_image_sum, f.padded, f.t)
     curv, slope = global_sums(f.comm, curv, slope)
     return curv, slope, f.comm.allreduce(tmax, op=MPI.MAX)
 
@@ -429,7 +445,7 @@ def _advance(f, s, tau, restart, refresh_interval):
     mean-gap control), ``p_el`` evaluated afresh, and the recurrence restarts
     unless only the refresh was due (with ``two_level``, also when the projection put at
     most :data:`KEEP_FRACTION` of ``F`` at the wall).  Otherwise the inverse half of the
-    transform begun by :func:`_curvature` completes ``K t`` and
+    transform begun by :func:`_direction` completes ``K t`` and
     ``p_el += tau K t``.
     """
     negative = f.comm.allreduce(_pass(_k.gcg_step, f.g, f.t, tau), op=MPI.SUM)
@@ -563,9 +579,7 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         zshift, rz = _precondition(f, s)
         beta, zshift = _beta(f, s, rz, zshift)
         s.rz_old = rz
-        _pass(_k.gcg_direction, f.padded, f.pel, f.g, f.vp, f.adhesive, f.t, s.lam_f, zshift,
-              beta)
-        curv, slope, tmax = _curvature(f, s)
+        curv, slope, tmax = _direction(f, s, zshift, beta)
         if not slope < 0:
             if _restarted(f, s, beta):
                 continue
