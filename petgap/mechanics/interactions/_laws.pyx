@@ -5,19 +5,11 @@ One function per law, called by the law's ``fill_stress`` once per iteration of
 the gap solver (:mod:`petgap.solvers.gap_cg`) over this rank's
 ``(nx_local, ny)`` C-contiguous slab.  ``vpp`` may be None: then only ``v'`` is
 written (the law's ``curvature_from_stress`` tells the solver how it gets ``v''``
-without it).
+without it).  The exponential law has none: NumPy's vectorised ``exp`` is
+faster than a loop of libm's
+(:meth:`petgap.mechanics.interactions.exponential.ExponentialAdhesion.fill_stress`).
 """
 from libc.math cimport exp
-
-
-def exponential_stress(const double[:, ::1] g, double[:, ::1] vp, double w, double rho):
-    """``vp = (w / rho) exp(-g / rho)``: the one exponential per point per iteration."""
-    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double wr = w / rho
-    with nogil:
-        for i in range(m):
-            for j in range(n):
-                vp[i, j] = wr * exp(-g[i, j] / rho)
 
 
 def maugis_dugdale_stress(const double[:, ::1] g, double[:, ::1] vp, double w, double delta):
