@@ -275,11 +275,15 @@ def copy_from(double[:, ::1] y, const double[:, ::1] x):
 # first summed onto the coarse row's nodes (weights ``1 - k / b`` and ``k / b`` at
 # offset ``k`` in a cell), which is then added to the two coarse rows around it.
 
-cdef inline void _row_to_coarse(const double[::1] row, double[:, ::1] out, Py_ssize_t gi,
-                                Py_ssize_t b, double[::1] acc) noexcept nogil:
-    """``out += hat-weighted sums of one fine row (global index gi)``; ``acc`` is scratch."""
+cdef inline void _row_to_coarse(const double* row, double[:, ::1] out, Py_ssize_t gi,
+                                Py_ssize_t b, const double* w, double* acc) noexcept nogil:
+    """``out += hat-weighted sums of one fine row (global index gi)``.
+
+    ``w[k] = k / b`` (the weights, computed once per pass rather than divided out
+    per point); ``acc`` is scratch of the coarse row's length.
+    """
     cdef Py_ssize_t ncx = out.shape[0], ncy = out.shape[1], J, J1, k, I, I1
-    cdef double lo, hi, v, w, fx
+    cdef double lo, hi, v, fx
     for J in range(ncy):
         acc[J] = 0.0
     for J in range(ncy):
@@ -287,9 +291,8 @@ cdef inline void _row_to_coarse(const double[::1] row, double[:, ::1] out, Py_ss
         hi = 0.0
         for k in range(b):
             v = row[J * b + k]
-            w = <double>k / b
-            lo += v - w * v
-            hi += w * v
+            lo += v - w[k] * v
+            hi += w[k] * v
         J1 = J + 1 if J + 1 < ncy else 0
         acc[J] += lo
         acc[J1] += hi
@@ -312,10 +315,11 @@ def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const doub
     the wall, ``v''(g)`` elsewhere (``vpp``, or ``-v' / divisor`` where the law fills
     no ``v''`` field, as in :func:`gcg_direction`; nothing for the hard wall).
     """
-    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef Py_ssize_t i, j, k, m = g.shape[0], n = g.shape[1]
     cdef bint second = vpp is not None
     cdef double[::1] row = np.zeros(n)
     cdef double[::1] acc = np.zeros(rhs.shape[1])
+    cdef double[::1] w = np.arange(b) / <double>b
     with nogil:
         for i in range(m):
             for j in range(n):
@@ -327,8 +331,8 @@ def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const doub
                     row[j] = vpp[i, j] if second else -vp[i, j] / divisor
                 else:
                     row[j] = 0.0
-            _row_to_coarse(real[i, :n], rhs, x0 + i, b, acc)
-            _row_to_coarse(row, springs, x0 + i, b, acc)
+            _row_to_coarse(&real[i, 0], rhs, x0 + i, b, &w[0], &acc[0])
+            _row_to_coarse(&row[0], springs, x0 + i, b, &w[0], &acc[0])
 
 
 def coarse_subtract(double[:, ::1] real, Py_ssize_t ny, const double[:, ::1] y,
