@@ -196,10 +196,15 @@ def gcg_image_sum(const double[:, ::1] real, const double[:, ::1] t):
 
 
 def gcg_step(double[:, ::1] g, const double[:, ::1] t, double tau):
-    """``g += tau t``; returns the number of points that went below zero."""
+    """``g += tau t``; returns ``(points below zero, sum and count of the points above zero)``.
+
+    The last two are :func:`shifted_positive_sums` at ``mu = 0``: the mean-gap
+    projection's first Newton data (a step keeps the mean, so its shift starts
+    at zero), summed while the new gap passes by.
+    """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double v
-    cdef long negative = 0
+    cdef double v, s = 0.0
+    cdef long negative = 0, count = 0
     with nogil:
         for i in range(m):
             for j in range(n):
@@ -207,7 +212,10 @@ def gcg_step(double[:, ::1] g, const double[:, ::1] t, double tau):
                 g[i, j] = v
                 if v < 0.0:
                     negative += 1
-    return negative
+                elif v > 0.0:
+                    s += v
+                    count += 1
+    return negative, s, count
 
 
 def axpy(double[:, ::1] y, const double[:, ::1] x, double a):

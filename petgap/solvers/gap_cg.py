@@ -164,13 +164,15 @@ class _State:
     cross: tuple = ()         # with two_level: sum_F z r_old, sum_F r_old, sum_F t (_beta)
 
 
-def _project_mean(grid, g, target, h, padded, comm):
+def _project_mean(grid, g, target, h, padded, comm, positive=None):
     """``g = max(g + mu, 0)`` off the wall with ``mean(g) = target``; loads ``g + h`` too.
 
     Points exactly at the wall stay there (the projection onto the current
     face; see :func:`petgap.solvers._kernels.shifted_positive_sums`).  Newton on the
     convex, increasing, piecewise-linear ``mean(max(g + mu, 0))`` converges in
-    a few steps, one reduction each.
+    a few steps, one reduction each.  ``positive``: its data at ``mu = 0``
+    (reduced), where a step that kept the mean has them from its own pass
+    (:func:`petgap.solvers._kernels.gcg_step`); the shift then starts there.
 
     Wall points pulled off by their gradient are not lifted here either: lifted
     by ``mu`` (several interaction lengths for a typical step), a released edge
@@ -181,9 +183,12 @@ def _project_mean(grid, g, target, h, padded, comm):
     restarts when they are pulled off hard (:func:`_released_strongly`).
     """
     n = grid.npoints
-    mu = target - grid.mean(g)
-    # start to the right of the root: the mean of max(., 0) is at least the mean
-    s, count = global_sums(comm, *_pass(_k.shifted_positive_sums, g, mu))
+    if positive is None:
+        mu = target - grid.mean(g)
+        # start to the right of the root: the mean of max(., 0) is at least the mean
+        s, count = global_sums(comm, *_pass(_k.shifted_positive_sums, g, mu))
+    else:
+        mu, (s, count) = 0.0, positive
     for _ in range(100):
         excess = s / n - target
         if abs(excess) <= 1e-14 * max(abs(target), 1e-300) or count == 0:
@@ -448,14 +453,13 @@ def _advance(f, s, tau, restart, refresh_interval):
     transform begun by :func:`_direction` completes ``K t`` and
     ``p_el += tau K t``.
     """
-    negative = f.comm.allreduce(_pass(_k.gcg_step, f.g, f.t, tau), op=MPI.SUM)
+    negative, *positive = global_sums(f.comm, *_pass(_k.gcg_step, f.g, f.t, tau))
     s.projected += negative > 0
     if negative > 0 or restart or s.since_fresh >= refresh_interval:
-        if f.load:
-            np.maximum(f.g, 0.0, out=f.g)
-            f.load_gap()
+        if f.load:  # g = max(g, 0), g + h into the FFT buffer in the same pass
+            _pass(_k.project_and_load, f.g, 0.0, f.h, f.padded)
         else:
-            _project_mean(f.grid, f.g, f.target, f.h, f.padded, f.comm)
+            _project_mean(f.grid, f.g, f.target, f.h, f.padded, f.comm, positive)
         f.fresh_pressure()
         s.fresh, s.since_fresh = True, 0
         s.beta_ok = negative <= f.keep * s.n_free and not restart
