@@ -25,47 +25,19 @@ import numpy as np
 # (points at the wall that are pulled off it).
 
 
-def gcg_gradient_sums(const double[:, ::1] pel, const double[:, ::1] g,
-                      const double[:, ::1] vp, bint adh, double lam_guess):
-    """The multiplier's and the free set's sums in one pass, F tested with a guessed ``lam_f``.
-
-    Returns ``(sum of grad over g > 0, count of g > 0)``, then
-    :func:`gcg_free_sums`'s four values with ``lam_f = lam_guess``, then
-    ``(below, above)``: the largest ``grad`` of the points at the wall counted in
-    F, and the smallest of those left out.  ``lam_f`` follows from the first two
-    sums once they are reduced over the ranks; the free sums hold for it exactly
-    (the same points, summed in the same order) when every wall point falls on
-    the same side of it as of the guess, i.e. when ``below + lam_f < 0 <=
-    above + lam_f`` (``grad + lam`` is monotone in ``grad``).
-    """
+def gcg_open_sums(const double[:, ::1] pel, const double[:, ::1] g,
+                  const double[:, ::1] vp, bint adh):
+    """Returns ``(sum of grad over g > 0, count of g > 0)``: the multiplier estimate."""
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double gr, s = 0.0, sf = 0.0, gmax = -INFINITY, gmin = INFINITY
-    cdef double below = -INFINITY, above = INFINITY
-    cdef long count = 0, nf = 0
-    cdef bint free
+    cdef double s = 0.0
+    cdef long count = 0
     with nogil:
         for i in range(m):
             for j in range(n):
-                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
                 if g[i, j] > 0.0:
-                    s += gr
+                    s += pel[i, j] + (vp[i, j] if adh else 0.0)
                     count += 1
-                    free = True
-                else:
-                    free = gr + lam_guess < 0.0
-                    if free:
-                        if gr > below:
-                            below = gr
-                    elif gr < above:
-                        above = gr
-                if free:
-                    sf += gr
-                    nf += 1
-                    if gr > gmax:
-                        gmax = gr
-                    if gr < gmin:
-                        gmin = gr
-    return s, count, sf, nf, gmax, gmin, below, above
+    return s, count
 
 
 def gcg_free_sums(const double[:, ::1] pel, const double[:, ::1] g, const double[:, ::1] vp,

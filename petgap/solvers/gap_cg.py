@@ -256,32 +256,6 @@ def _released_strongly(f, s, history):
     return f.comm.allreduce(strong, op=MPI.SUM) != s.n_open
 
 
-def _free_sums(f, s):
-    """``(sum_F grad, |F|, crossed)`` and ``(max_F grad, -min_F grad)``, reduced over the ranks.
-
-    Under mean-gap control ``F`` depends on ``P0_open`` (:func:`_multiplier`),
-    whose sums are reduced first: one pass makes both, testing ``F`` with the
-    last iteration's ``P0_open``, and says whether the new one puts any wall
-    point on the other side (:func:`petgap.solvers._kernels.gcg_gradient_sums`).
-    Only then is ``F`` summed again, so the sums are those of ``F`` at the new
-    ``P0_open`` in every case, in one pass over the slab most of the time.
-    ``crossed`` counts the points whose ``v'`` jumped (:func:`_multiplier`).
-    """
-    args = (f.pel, f.g, f.vp, f.adhesive)
-    if not f.load:
-        s_open, n_open, *free, below, above = _pass(_k.gcg_gradient_sums, *args, s.lam_f)
-        s_open, s.n_open, *sums = global_sums(f.comm, s_open, n_open, *free[:2], f.crossed)
-        s.lam_f = -s_open / s.n_open if s.n_open > 0 else 0.0
-        ext = np.array([free[2], -free[3], below, -above])
-        f.comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
-        if ext[2] + s.lam_f < 0.0 <= s.lam_f - ext[3]:
-            return sums, ext[:2]
-    free = _pass(_k.gcg_free_sums, *args, s.lam_f)
-    ext = np.array([free[2], -free[3]])
-    f.comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
-    return global_sums(f.comm, *free[:2], f.crossed), ext
-
-
 def _multiplier(f, s, history):
     """The free set's sums: ``P0`` (mean-gap control), whether to restart, and the residual.
 
@@ -298,11 +272,22 @@ def _multiplier(f, s, history):
     from the wall (:func:`_released_strongly`).  The count rides on the free
     set's reduction.
     """
-    (s_free, s.n_free, crossed), ext = _free_sums(f, s)
-    s.beta_ok = s.beta_ok and crossed == 0
+    comm = f.comm
+    if not f.load:
+        s_open, s.n_open = global_sums(comm, *_pass(_k.gcg_open_sums, f.pel, f.g, f.vp,
+                                                    f.adhesive))
+        s.lam_f = -s_open / s.n_open if s.n_open > 0 else 0.0
+    s_free, n_free, gmax, gmin = _pass(_k.gcg_free_sums, f.pel, f.g, f.vp, f.adhesive, s.lam_f)
+    if f.jumps:
+        s_free, s.n_free, crossed = global_sums(comm, s_free, n_free, f.crossed)
+        s.beta_ok = s.beta_ok and crossed == 0
+    else:
+        s_free, s.n_free = global_sums(comm, s_free, n_free)
     if s.beta_ok and not f.load and s.n_free > s.n_open:
         s.beta_ok = not _released_strongly(f, s, history)
         s.released += not s.beta_ok
+    ext = np.array([gmax, -gmin])
+    comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
     if not f.load:
         s.lam = -s_free / s.n_free if s.n_free > 0 else s.lam_f
     s.lam_free = -s_free / s.n_free if s.n_free > 0 else s.lam

@@ -151,11 +151,8 @@ class CoarseTerm:
         self.symbol[0, 0] = mean_compliance
         self.edge = EDGE_SPRING * contact_modulus / np.sqrt(grid.dx * grid.dy)
         self.root_symbol = np.sqrt(self.symbol)   # H = Fc^{1/2}
-        # Parseval's weights of the rfft2 half plane: the columns without a mirror once
-        self.half_plane = np.full(self.symbol.shape, 2.0)
-        self.half_plane[:, 0] = 1.0
-        if self.coarse_shape[1] % 2 == 0:
-            self.half_plane[:, -1] = 1.0
+        # the rfft2 columns that are their own mirrors (Parseval's sums, _dot)
+        self.own_mirror = (0, -1) if self.coarse_shape[1] % 2 == 0 else (0,)
         self.springs = np.zeros(self.coarse_shape)
         self.rhs = np.zeros(self.coarse_shape)
         self.inner_iterations = self.clipped = 0
@@ -177,8 +174,15 @@ class CoarseTerm:
         self.springs, self.rhs = self._summed(local)
 
     def _dot(self, a, b):
-        """``sum a b`` of two real coarse fields given by their ``rfft2`` (Parseval, up to ``1/N``)."""
-        return float(np.sum(self.half_plane * (a.real * b.real + a.imag * b.imag)))
+        """``sum a b`` of two real coarse fields given by their ``rfft2`` (Parseval, up to ``1/N``).
+
+        The half plane holds every other column once and its mirror implicitly:
+        twice its sum, less the columns that are their own mirrors.
+        """
+        dot = 2.0 * np.vdot(a, b).real
+        for c in self.own_mirror:
+            dot -= np.vdot(a[:, c], b[:, c]).real
+        return float(dot)
 
     def _solve(self, springs, b):
         """``(I + H W H)^{-1} b`` by conjugate gradients, or None where it is not positive.
