@@ -439,7 +439,7 @@ def _advance(f, s, tau, restart, refresh_interval):
     ``p_el += tau K t``.
     """
     negative, *positive = global_sums(f.comm, *_pass(_k.gcg_step, f.g, f.t, tau))
-    s.projected += negative > 0
+    s.projected += bool(negative > 0)
     if negative > 0 or restart or s.since_fresh >= refresh_interval:
         if f.load:  # g = max(g, 0), g + h into the FFT buffer in the same pass
             _pass(_k.project_and_load, f.g, 0.0, f.h, f.padded)
