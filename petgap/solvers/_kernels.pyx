@@ -295,7 +295,7 @@ def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const doub
     the wall, ``v''(g)`` elsewhere (``vpp``, or ``-v' / divisor`` where the law fills
     no ``v''`` field, as in :func:`gcg_direction`; nothing for the hard wall).
     """
-    cdef Py_ssize_t i, j, k, m = g.shape[0], n = g.shape[1]
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef bint second = vpp is not None
     cdef double[::1] row = np.zeros(n)
     cdef double[::1] acc = np.zeros(rhs.shape[1])
