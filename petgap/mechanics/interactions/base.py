@@ -68,8 +68,7 @@ class InteractionLaw:
         Returns the number of points whose ``v'`` jumped since ``vp`` was last
         filled (0 for a law without jumps).  This NumPy version serves a smooth
         law without a compiled kernel; the laws of the registry override it
-        with their kernels in :mod:`._laws` (the exponential with NumPy's
-        vectorised ``exp``, in place).
+        with their kernels in :mod:`._laws`.
         """
         vp[...] = self.derivative(gap)
         if vpp is not None:

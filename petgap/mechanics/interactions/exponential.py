@@ -9,6 +9,7 @@ its curvature pass instead of holding a field of it.
 """
 import numpy as np
 
+from petgap.mechanics.interactions import _laws
 from petgap.mechanics.interactions.base import AdhesionLaw
 
 
@@ -44,16 +45,6 @@ class ExponentialAdhesion(AdhesionLaw):
         return contact_modulus * self.range ** 2 / self.work
 
     def fill_stress(self, gap, vp, vpp=None):
-        """``vp = v'(gap)`` in place (``v''`` is ``-vp / rho``), by NumPy's ufuncs.
-
-        The exponential per point is the dearest part of an adhesive iteration
-        outside the transforms.  NumPy's ``exp`` is vectorised where the machine
-        has the instructions (AVX-512), where a compiled loop calls libm's exp
-        point by point; in three passes it still costs a fraction of that loop.
-        A point's value depends on its gap alone (the same as :meth:`derivative`'s),
-        never on the decomposition.
-        """
-        np.divide(gap, -self.range, out=vp)
-        np.exp(vp, out=vp)
-        np.multiply(vp, self.work / self.range, out=vp)
+        """``vp = v'(gap)``, one exponential per point (``v''`` is ``-vp / rho``)."""
+        _laws.exponential_stress(gap, vp, self.work, self.range)
         return 0
