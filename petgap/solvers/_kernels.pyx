@@ -41,23 +41,34 @@ def gcg_open_sums(const double[:, ::1] pel, const double[:, ::1] g,
 
 
 def gcg_free_sums(const double[:, ::1] pel, const double[:, ::1] g, const double[:, ::1] vp,
-                  bint adh, double lam_f):
-    """Returns ``(sum_F grad, count_F, max_F grad, min_F grad)``."""
+                  bint adh, double lam_f, double lam_pull=INFINITY):
+    """Returns ``(sum_F grad, count_F, max_F grad, min_F grad, strong)``.
+
+    ``strong`` counts the points at the wall with ``grad + lam_pull < 0``: those
+    pulled off it beyond ``lam_pull`` (the gap solver's strong releases).
+    """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double gr, s = 0.0, gmax = -INFINITY, gmin = INFINITY
-    cdef long count = 0
+    cdef long count = 0, strong = 0
+    cdef bint free
     with nogil:
         for i in range(m):
             for j in range(n):
                 gr = pel[i, j] + (vp[i, j] if adh else 0.0)
-                if g[i, j] > 0.0 or gr + lam_f < 0.0:
+                if g[i, j] > 0.0:
+                    free = True
+                else:
+                    free = gr + lam_f < 0.0
+                    if gr + lam_pull < 0.0:
+                        strong += 1
+                if free:
                     s += gr
                     count += 1
                     if gr > gmax:
                         gmax = gr
                     if gr < gmin:
                         gmin = gr
-    return s, count, gmax, gmin
+    return s, count, gmax, gmin, strong
 
 
 cdef inline double _free_residual(double pel, double g, double vp, bint adh, double lam_f,

@@ -13,7 +13,7 @@ and named parts, each with its reason in its docstring:
 * :func:`_start`: the first gap and its elastic pressure;
 * :func:`_multiplier`: the free set ``F`` (points off the wall, and points at
   the wall pulled off it), ``P0`` and the residual; with
-  :func:`_released_strongly`, the rule that restarts the recurrence when a
+  :func:`_release_threshold`, the rule that restarts the recurrence when a
   point leaves the wall;
 * :func:`_precondition`: ``z = P_F K^{-1} P_F r`` with the mean mode, and with
   ``two_level`` the coarse term of :mod:`petgap.solvers.gap_two_level`;
@@ -158,7 +158,7 @@ class _State:
     since_fresh: int = 0
     negative_curvature: int = 0
     projected: int = 0        # steps whose projection acted
-    released: int = 0         # restarts on a strong release (_released_strongly)
+    released: int = 0         # restarts on a strong release (_release_threshold)
     capped: int = 0           # steps capped at the law's length scale
     apart: int = 0            # consecutive iterations past pull-off (_pulled_off)
     cross: tuple = ()         # with two_level: sum_F z r_old, sum_F r_old, sum_F t (_beta)
@@ -180,7 +180,7 @@ def _project_mean(grid, g, target, h, padded, comm, positive=None):
     after each lift opens the whole contact of an adhesive wave, which then
     loses the contact that unloading must hold (hysteresis).  Points leave the
     wall through the conjugate gradients' free set instead, whose recurrence
-    restarts when they are pulled off hard (:func:`_released_strongly`).
+    restarts when they are pulled off hard (:func:`_release_threshold`).
     """
     n = grid.npoints
     if positive is None:
@@ -225,8 +225,8 @@ def _start(f, initial_gap):
     f.fresh_pressure()
 
 
-def _released_strongly(f, s, history):
-    """Whether points at the wall joined ``F`` pulled off it by half the last residual or more.
+def _release_threshold(f, s, history):
+    """``P0_open + r / 2``: a point at the wall pulled off it beyond this restarts the recurrence.
 
     Conjugacy holds on a fixed free set (Polonsky & Keer restart theirs when
     points enter the contact set).  Points join the wall by the projection,
@@ -243,17 +243,19 @@ def _released_strongly(f, s, history):
     (the edges of rough contacts, a pixel or two per step) are left to the
     recurrence: restarting on every change of ``F`` costs rough surfaces
     iterations, and lets round-off decide the path of a sticky solve
-    differently on different rank counts.  Counting the strong pulls costs one
-    more pass, made only when the recurrence would go on with points at the
-    wall in ``F``.
+    differently on different rank counts.  The strong pulls are counted in
+    the free set's pass (:func:`petgap.solvers._kernels.gcg_free_sums`) and
+    reduced with its sums; the count decides only when the recurrence would go
+    on with points at the wall in ``F``.
 
     Mean-gap control only: load control, which :func:`petgap.solvers.dispatch.solve`
     gives this solver for the hard wall alone, has no count of the points off
-    the wall to compare with, and hard-wall edges have no crack tip to crawl.
+    the wall to compare with, and hard-wall edges have no crack tip to crawl
+    (infinite there, and before the first residual: no point counts).
     """
-    pull = 0.5 * history[-1] * f.problem.pressure_scale
-    strong = _pass(_k.gcg_free_sums, f.pel, f.g, f.vp, f.adhesive, s.lam_f + pull)[1]
-    return f.comm.allreduce(strong, op=MPI.SUM) != s.n_open
+    if f.load or not history:
+        return np.inf
+    return s.lam_f + 0.5 * history[-1] * f.problem.pressure_scale
 
 
 def _multiplier(f, s, history):
@@ -269,22 +271,20 @@ def _multiplier(f, s, history):
     The recurrence restarts when a point crossed a jump of ``v'`` (a law with
     ``jumps``, e.g. Maugis-Dugdale at ``delta``): its gradient changed by the
     jump, which the old direction knows nothing of, as for a point released
-    from the wall (:func:`_released_strongly`).  The count rides on the free
-    set's reduction.
+    from the wall (:func:`_release_threshold`).  Both counts ride on the free
+    set's pass and reduction.
     """
     comm = f.comm
     if not f.load:
         s_open, s.n_open = global_sums(comm, *_pass(_k.gcg_open_sums, f.pel, f.g, f.vp,
                                                     f.adhesive))
         s.lam_f = -s_open / s.n_open if s.n_open > 0 else 0.0
-    s_free, n_free, gmax, gmin = _pass(_k.gcg_free_sums, f.pel, f.g, f.vp, f.adhesive, s.lam_f)
-    if f.jumps:
-        s_free, s.n_free, crossed = global_sums(comm, s_free, n_free, f.crossed)
-        s.beta_ok = s.beta_ok and crossed == 0
-    else:
-        s_free, s.n_free = global_sums(comm, s_free, n_free)
+    s_free, n_free, gmax, gmin, strong = _pass(_k.gcg_free_sums, f.pel, f.g, f.vp, f.adhesive,
+                                               s.lam_f, _release_threshold(f, s, history))
+    s_free, s.n_free, crossed, strong = global_sums(comm, s_free, n_free, f.crossed, strong)
+    s.beta_ok = s.beta_ok and crossed == 0
     if s.beta_ok and not f.load and s.n_free > s.n_open:
-        s.beta_ok = not _released_strongly(f, s, history)
+        s.beta_ok = bool(strong == 0)
         s.released += not s.beta_ok
     ext = np.array([gmax, -gmin])
     comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
