@@ -25,7 +25,7 @@ and named parts, each with its reason in its docstring:
   recurrence ``p_el += tau K t``.
 
 The interaction law is asked, never read: it fills ``v'`` (and ``v''`` where it
-needs a field of it) by its own kernel, says how the curvature pass gets
+needs a field of it) by its own kernel, says how the direction pass gets
 ``v''`` otherwise (``curvature_from_stress``), and gives the length scale a step
 is capped at (:mod:`petgap.mechanics.interactions.base`).
 
@@ -55,7 +55,7 @@ Memory: the fields ``g``, ``p_el``, ``t`` and ``v'`` besides the FFT buffer (and
 the last residual with ``two_level``); a
 law whose ``v''`` is not a multiple of its ``v'`` (Lennard-Jones, the squared
 exponential) adds one field for ``v''``, filled in the same pass as ``v'``, so
-that the curvature pass needs no transcendental function of its own.
+that the direction pass needs no transcendental function of its own.
 """
 from dataclasses import dataclass
 
@@ -94,7 +94,7 @@ class _Fields:
 
     ``vp`` caches ``v'(g)`` once per iteration (the hard wall has none: ``vp`` is
     then ``pel``, never read); ``vpp`` is ``v''(g)`` for a law that needs the
-    field, else None and the curvature pass takes ``v'' = -v' / divisor``.
+    field, else None and the direction pass takes ``v'' = -v' / divisor``.
     """
 
     def __init__(self, problem, load, target, two_level=False):
