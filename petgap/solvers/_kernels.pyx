@@ -41,23 +41,34 @@ def gcg_open_sums(const double[:, ::1] pel, const double[:, ::1] g,
 
 
 def gcg_free_sums(const double[:, ::1] pel, const double[:, ::1] g, const double[:, ::1] vp,
-                  bint adh, double lam_f):
-    """Returns ``(sum_F grad, count_F, max_F grad, min_F grad)``."""
+                  bint adh, double lam_f, double lam_pull=INFINITY):
+    """Returns ``(sum_F grad, count_F, max_F grad, min_F grad, strong)``.
+
+    ``strong`` counts the points at the wall with ``grad + lam_pull < 0``: those
+    pulled off it beyond ``lam_pull`` (the gap solver's strong releases).
+    """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double gr, s = 0.0, gmax = -INFINITY, gmin = INFINITY
-    cdef long count = 0
+    cdef long count = 0, strong = 0
+    cdef bint free
     with nogil:
         for i in range(m):
             for j in range(n):
                 gr = pel[i, j] + (vp[i, j] if adh else 0.0)
-                if g[i, j] > 0.0 or gr + lam_f < 0.0:
+                if g[i, j] > 0.0:
+                    free = True
+                else:
+                    free = gr + lam_f < 0.0
+                    if gr + lam_pull < 0.0:
+                        strong += 1
+                if free:
                     s += gr
                     count += 1
                     if gr > gmax:
                         gmax = gr
                     if gr < gmin:
                         gmin = gr
-    return s, count, gmax, gmin
+    return s, count, gmax, gmin, strong
 
 
 cdef inline double _free_residual(double pel, double g, double vp, bint adh, double lam_f,
@@ -115,67 +126,68 @@ def gcg_precond_sums(const double[:, ::1] real, const double[:, ::1] pel,
 
 
 def gcg_direction(double[:, ::1] real, const double[:, ::1] pel, const double[:, ::1] g,
-                  const double[:, ::1] vp, bint adh, double[:, ::1] t, double lam_f,
-                  double zshift, double beta):
-    """``t = -(z - zshift) + beta t`` on F, 0 elsewhere (``z = real``); then ``real = t``."""
+                  const double[:, ::1] vp, const double[:, ::1] vpp, bint adh,
+                  double[:, ::1] t, double lam_f, double zshift, double beta, double lam,
+                  double divisor):
+    """``t = -(z - zshift) + beta t`` on F, 0 elsewhere (``z = real``); then ``real = t``.
+
+    Returns the pointwise part of the step's data along the new ``t``, in the
+    same pass: ``(sum v''(g) t^2, sum (grad + lam) t, max |t|)``.  ``v''`` is
+    ``vpp`` where the law fills that field, otherwise ``-v' / divisor`` (the
+    law's ``curvature_from_stress``: ``rho`` for the exponential, ``inf`` for a
+    law with ``v'' = 0``).  The elastic part ``t.K t`` needs the transform of
+    ``t`` (:func:`gcg_image_sum`, or by Parseval in the transform's forward half).
+    """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double gr, v
+    cdef double gr, v, e, curv = 0.0, slope = 0.0, tmax = 0.0
+    cdef bint second = vpp is not None
     with nogil:
         for i in range(m):
             for j in range(n):
-                gr = pel[i, j] + (vp[i, j] if adh else 0.0)
+                e = vp[i, j] if adh else 0.0
+                gr = pel[i, j] + e
                 if g[i, j] > 0.0 or gr + lam_f < 0.0:
                     v = -(real[i, j] - zshift) + beta * t[i, j]
                 else:
                     v = 0.0
                 t[i, j] = v
                 real[i, j] = v
+                if v == 0.0:
+                    continue
+                if adh:
+                    if second:
+                        curv += vpp[i, j] * v * v
+                    else:
+                        curv -= (e / divisor) * v * v
+                    slope += (pel[i, j] + e + lam) * v
+                else:
+                    slope += (pel[i, j] + lam) * v
+                if fabs(v) > tmax:
+                    tmax = fabs(v)
+    return curv, slope, tmax
 
 
-def gcg_curvature(const double[:, ::1] real, const double[:, ::1] t, const double[:, ::1] pel,
-                  const double[:, ::1] g, const double[:, ::1] vp, const double[:, ::1] vpp,
-                  bint adh, double lam, double divisor):
-    """Returns ``(t.K t + sum v''(g) t^2, sum (grad + lam) t, max |t|, min over t < 0 of g / -t)``.
-
-    ``real`` holds ``K t``, or is None: then the first value leaves ``t.K t`` out
-    (the caller has it by Parseval).  ``v''`` is ``vpp`` where the law fills that
-    field, otherwise ``-v' / divisor`` (the law's ``curvature_from_stress``: ``rho``
-    for the exponential, ``inf`` for a law with ``v'' = 0``).  The last value is
-    the step at which the first free point would reach the wall.
-    """
-    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double tv, e, curv = 0.0, slope = 0.0, tmax = 0.0, reach = INFINITY
-    cdef bint image = real is not None
-    cdef bint second = vpp is not None
+def gcg_image_sum(const double[:, ::1] real, const double[:, ::1] t):
+    """Returns ``sum t (K t)`` with ``real`` holding ``K t``: where the transform has no halves."""
+    cdef Py_ssize_t i, j, m = t.shape[0], n = t.shape[1]
+    cdef double curv = 0.0
     with nogil:
         for i in range(m):
             for j in range(n):
-                tv = t[i, j]
-                if tv == 0.0:
-                    continue
-                if image:
-                    curv += tv * real[i, j]
-                if adh:
-                    e = vp[i, j]
-                    if second:
-                        curv += vpp[i, j] * tv * tv
-                    else:
-                        curv -= (e / divisor) * tv * tv
-                    slope += (pel[i, j] + e + lam) * tv
-                else:
-                    slope += (pel[i, j] + lam) * tv
-                if fabs(tv) > tmax:
-                    tmax = fabs(tv)
-                if tv < 0.0 and g[i, j] / -tv < reach:
-                    reach = g[i, j] / -tv
-    return curv, slope, tmax, reach
+                curv += t[i, j] * real[i, j]
+    return curv
 
 
 def gcg_step(double[:, ::1] g, const double[:, ::1] t, double tau):
-    """``g += tau t``; returns the number of points that went below zero."""
+    """``g += tau t``; returns ``(points below zero, sum and count of the points above zero)``.
+
+    The last two are :func:`shifted_positive_sums` at ``mu = 0``: the mean-gap
+    projection's first Newton data (a step keeps the mean, so its shift starts
+    at zero), summed while the new gap passes by.
+    """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double v
-    cdef long negative = 0
+    cdef double v, s = 0.0
+    cdef long negative = 0, count = 0
     with nogil:
         for i in range(m):
             for j in range(n):
@@ -183,7 +195,10 @@ def gcg_step(double[:, ::1] g, const double[:, ::1] t, double tau):
                 g[i, j] = v
                 if v < 0.0:
                     negative += 1
-    return negative
+                elif v > 0.0:
+                    s += v
+                    count += 1
+    return negative, s, count
 
 
 def axpy(double[:, ::1] y, const double[:, ::1] x, double a):
@@ -251,11 +266,15 @@ def copy_from(double[:, ::1] y, const double[:, ::1] x):
 # first summed onto the coarse row's nodes (weights ``1 - k / b`` and ``k / b`` at
 # offset ``k`` in a cell), which is then added to the two coarse rows around it.
 
-cdef inline void _row_to_coarse(const double[::1] row, double[:, ::1] out, Py_ssize_t gi,
-                                Py_ssize_t b, double[::1] acc) noexcept nogil:
-    """``out += hat-weighted sums of one fine row (global index gi)``; ``acc`` is scratch."""
+cdef inline void _row_to_coarse(const double* row, double[:, ::1] out, Py_ssize_t gi,
+                                Py_ssize_t b, const double* w, double* acc) noexcept nogil:
+    """``out += hat-weighted sums of one fine row (global index gi)``.
+
+    ``w[k] = k / b`` (the weights, computed once per pass rather than divided out
+    per point); ``acc`` is scratch of the coarse row's length.
+    """
     cdef Py_ssize_t ncx = out.shape[0], ncy = out.shape[1], J, J1, k, I, I1
-    cdef double lo, hi, v, w, fx
+    cdef double lo, hi, v, fx
     for J in range(ncy):
         acc[J] = 0.0
     for J in range(ncy):
@@ -263,9 +282,8 @@ cdef inline void _row_to_coarse(const double[::1] row, double[:, ::1] out, Py_ss
         hi = 0.0
         for k in range(b):
             v = row[J * b + k]
-            w = <double>k / b
-            lo += v - w * v
-            hi += w * v
+            lo += v - w[k] * v
+            hi += w[k] * v
         J1 = J + 1 if J + 1 < ncy else 0
         acc[J] += lo
         acc[J1] += hi
@@ -286,12 +304,13 @@ def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const doub
     ``rhs += R r`` (times ``b^2``) of the residual written, and ``springs +=`` the
     same of the springs: ``edge`` per free neighbour along the row at a point at
     the wall, ``v''(g)`` elsewhere (``vpp``, or ``-v' / divisor`` where the law fills
-    no ``v''`` field, as in :func:`gcg_curvature`; nothing for the hard wall).
+    no ``v''`` field, as in :func:`gcg_direction`; nothing for the hard wall).
     """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef bint second = vpp is not None
     cdef double[::1] row = np.zeros(n)
     cdef double[::1] acc = np.zeros(rhs.shape[1])
+    cdef double[::1] w = np.arange(b) / <double>b
     with nogil:
         for i in range(m):
             for j in range(n):
@@ -303,8 +322,8 @@ def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const doub
                     row[j] = vpp[i, j] if second else -vp[i, j] / divisor
                 else:
                     row[j] = 0.0
-            _row_to_coarse(real[i, :n], rhs, x0 + i, b, acc)
-            _row_to_coarse(row, springs, x0 + i, b, acc)
+            _row_to_coarse(&real[i, 0], rhs, x0 + i, b, &w[0], &acc[0])
+            _row_to_coarse(&row[0], springs, x0 + i, b, &w[0], &acc[0])
 
 
 def coarse_subtract(double[:, ::1] real, Py_ssize_t ny, const double[:, ::1] y,

@@ -13,19 +13,19 @@ and named parts, each with its reason in its docstring:
 * :func:`_start`: the first gap and its elastic pressure;
 * :func:`_multiplier`: the free set ``F`` (points off the wall, and points at
   the wall pulled off it), ``P0`` and the residual; with
-  :func:`_released_strongly`, the rule that restarts the recurrence when a
+  :func:`_release_threshold`, the rule that restarts the recurrence when a
   point leaves the wall;
 * :func:`_precondition`: ``z = P_F K^{-1} P_F r`` with the mean mode, and with
   ``two_level`` the coarse term of :mod:`petgap.solvers.gap_two_level`;
 * :func:`_beta`: the recurrence's ``beta``, Polak-Ribiere+ with ``two_level``;
-* :func:`_curvature` and :func:`_step_length`: the step along the direction,
-  its cap at the interaction's length scale and the non-convex case;
+* :func:`_direction` and :func:`_step_length`: the new direction, the step along
+  it, its cap at the interaction's length scale and the non-convex case;
 * :func:`_project_mean`: the projection onto ``{g >= 0, mean(g) = g_bar}``;
 * :func:`_advance`: the step, then the projection and a restart, or the
   recurrence ``p_el += tau K t``.
 
 The interaction law is asked, never read: it fills ``v'`` (and ``v''`` where it
-needs a field of it) by its own kernel, says how the curvature pass gets
+needs a field of it) by its own kernel, says how the direction pass gets
 ``v''`` otherwise (``curvature_from_stress``), and gives the length scale a step
 is capped at (:mod:`petgap.mechanics.interactions.base`).
 
@@ -55,7 +55,7 @@ Memory: the fields ``g``, ``p_el``, ``t`` and ``v'`` besides the FFT buffer (and
 the last residual with ``two_level``); a
 law whose ``v''`` is not a multiple of its ``v'`` (Lennard-Jones, the squared
 exponential) adds one field for ``v''``, filled in the same pass as ``v'``, so
-that the curvature pass needs no transcendental function of its own.
+that the direction pass needs no transcendental function of its own.
 """
 from dataclasses import dataclass
 
@@ -94,7 +94,7 @@ class _Fields:
 
     ``vp`` caches ``v'(g)`` once per iteration (the hard wall has none: ``vp`` is
     then ``pel``, never read); ``vpp`` is ``v''(g)`` for a law that needs the
-    field, else None and the curvature pass takes ``v'' = -v' / divisor``.
+    field, else None and the direction pass takes ``v'' = -v' / divisor``.
     """
 
     def __init__(self, problem, load, target, two_level=False):
@@ -158,19 +158,21 @@ class _State:
     since_fresh: int = 0
     negative_curvature: int = 0
     projected: int = 0        # steps whose projection acted
-    released: int = 0         # restarts on a strong release (_released_strongly)
+    released: int = 0         # restarts on a strong release (_release_threshold)
     capped: int = 0           # steps capped at the law's length scale
     apart: int = 0            # consecutive iterations past pull-off (_pulled_off)
     cross: tuple = ()         # with two_level: sum_F z r_old, sum_F r_old, sum_F t (_beta)
 
 
-def _project_mean(grid, g, target, h, padded, comm):
+def _project_mean(grid, g, target, h, padded, comm, positive=None):
     """``g = max(g + mu, 0)`` off the wall with ``mean(g) = target``; loads ``g + h`` too.
 
     Points exactly at the wall stay there (the projection onto the current
     face; see :func:`petgap.solvers._kernels.shifted_positive_sums`).  Newton on the
     convex, increasing, piecewise-linear ``mean(max(g + mu, 0))`` converges in
-    a few steps, one reduction each.
+    a few steps, one reduction each.  ``positive``: its data at ``mu = 0``
+    (reduced), where a step that kept the mean has them from its own pass
+    (:func:`petgap.solvers._kernels.gcg_step`); the shift then starts there.
 
     Wall points pulled off by their gradient are not lifted here either: lifted
     by ``mu`` (several interaction lengths for a typical step), a released edge
@@ -178,12 +180,15 @@ def _project_mean(grid, g, target, h, padded, comm):
     after each lift opens the whole contact of an adhesive wave, which then
     loses the contact that unloading must hold (hysteresis).  Points leave the
     wall through the conjugate gradients' free set instead, whose recurrence
-    restarts when they are pulled off hard (:func:`_released_strongly`).
+    restarts when they are pulled off hard (:func:`_release_threshold`).
     """
     n = grid.npoints
-    mu = target - grid.mean(g)
-    # start to the right of the root: the mean of max(., 0) is at least the mean
-    s, count = global_sums(comm, *_pass(_k.shifted_positive_sums, g, mu))
+    if positive is None:
+        mu = target - grid.mean(g)
+        # start to the right of the root: the mean of max(., 0) is at least the mean
+        s, count = global_sums(comm, *_pass(_k.shifted_positive_sums, g, mu))
+    else:
+        mu, (s, count) = 0.0, positive
     for _ in range(100):
         excess = s / n - target
         if abs(excess) <= 1e-14 * max(abs(target), 1e-300) or count == 0:
@@ -220,8 +225,8 @@ def _start(f, initial_gap):
     f.fresh_pressure()
 
 
-def _released_strongly(f, s, history):
-    """Whether points at the wall joined ``F`` pulled off it by half the last residual or more.
+def _release_threshold(f, s, history):
+    """``P0_open + r / 2``: a point at the wall pulled off it beyond this restarts the recurrence.
 
     Conjugacy holds on a fixed free set (Polonsky & Keer restart theirs when
     points enter the contact set).  Points join the wall by the projection,
@@ -238,17 +243,19 @@ def _released_strongly(f, s, history):
     (the edges of rough contacts, a pixel or two per step) are left to the
     recurrence: restarting on every change of ``F`` costs rough surfaces
     iterations, and lets round-off decide the path of a sticky solve
-    differently on different rank counts.  Counting the strong pulls costs one
-    more pass, made only when the recurrence would go on with points at the
-    wall in ``F``.
+    differently on different rank counts.  The strong pulls are counted in
+    the free set's pass (:func:`petgap.solvers._kernels.gcg_free_sums`) and
+    reduced with its sums; the count decides only when the recurrence would go
+    on with points at the wall in ``F``.
 
     Mean-gap control only: load control, which :func:`petgap.solvers.dispatch.solve`
     gives this solver for the hard wall alone, has no count of the points off
-    the wall to compare with, and hard-wall edges have no crack tip to crawl.
+    the wall to compare with, and hard-wall edges have no crack tip to crawl
+    (infinite there, and before the first residual: no point counts).
     """
-    pull = 0.5 * history[-1] * f.problem.pressure_scale
-    strong = _pass(_k.gcg_free_sums, f.pel, f.g, f.vp, f.adhesive, s.lam_f + pull)[1]
-    return f.comm.allreduce(strong, op=MPI.SUM) != s.n_open
+    if f.load or not history:
+        return np.inf
+    return s.lam_f + 0.5 * history[-1] * f.problem.pressure_scale
 
 
 def _multiplier(f, s, history):
@@ -264,22 +271,20 @@ def _multiplier(f, s, history):
     The recurrence restarts when a point crossed a jump of ``v'`` (a law with
     ``jumps``, e.g. Maugis-Dugdale at ``delta``): its gradient changed by the
     jump, which the old direction knows nothing of, as for a point released
-    from the wall (:func:`_released_strongly`).  The count rides on the free
-    set's reduction.
+    from the wall (:func:`_release_threshold`).  Both counts ride on the free
+    set's pass and reduction.
     """
     comm = f.comm
     if not f.load:
         s_open, s.n_open = global_sums(comm, *_pass(_k.gcg_open_sums, f.pel, f.g, f.vp,
                                                     f.adhesive))
         s.lam_f = -s_open / s.n_open if s.n_open > 0 else 0.0
-    s_free, n_free, gmax, gmin = _pass(_k.gcg_free_sums, f.pel, f.g, f.vp, f.adhesive, s.lam_f)
-    if f.jumps:
-        s_free, s.n_free, crossed = global_sums(comm, s_free, n_free, f.crossed)
-        s.beta_ok = s.beta_ok and crossed == 0
-    else:
-        s_free, s.n_free = global_sums(comm, s_free, n_free)
+    s_free, n_free, gmax, gmin, strong = _pass(_k.gcg_free_sums, f.pel, f.g, f.vp, f.adhesive,
+                                               s.lam_f, _release_threshold(f, s, history))
+    s_free, s.n_free, crossed, strong = global_sums(comm, s_free, n_free, f.crossed, strong)
+    s.beta_ok = s.beta_ok and crossed == 0
     if s.beta_ok and not f.load and s.n_free > s.n_open:
-        s.beta_ok = not _released_strongly(f, s, history)
+        s.beta_ok = bool(strong == 0)
         s.released += not s.beta_ok
     ext = np.array([gmax, -gmin])
     comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
@@ -372,25 +377,26 @@ def _beta(f, s, rz, zshift):
     return beta, zshift
 
 
-def _curvature(f, s):
-    """``(t.K t + sum v''(g) t^2, slope, max |t|)`` along the direction ``t``.
+def _direction(f, s, zshift, beta):
+    """The new direction ``t`` (from ``z`` in the FFT buffer) and ``(t.K t + sum v''(g) t^2,
+    slope, max |t|)`` along it.
 
-    The curvature needs ``K t`` only through ``t.K t``, which by Parseval the
-    forward half of the transform gives
+    ``t = -(z - zshift) + beta t`` on ``F``, 0 elsewhere; the pass that writes it
+    also sums the slope and the interaction's curvature along it.  The step
+    needs ``K t`` only through ``t.K t``, which by Parseval the forward half of
+    the transform gives
     (:meth:`petgap.mechanics.half_space.ElasticHalfSpace.begin_in_buffer`); the
     inverse half runs later only if ``p_el`` follows by the recurrence (a whole
     pair where the half-space has no halves).
     """
     lam = s.lam if f.load else 0.0
+    curv, slope, tmax = _pass(_k.gcg_direction, f.padded, f.pel, f.g, f.vp, f.vpp, f.adhesive,
+                              f.t, s.lam_f, zshift, beta, lam, f.divisor)
     if f.half_space.splits_transforms:
-        form = f.half_space.begin_in_buffer(inverse=False)
-        curv, slope, tmax, _ = _pass(_k.gcg_curvature, None, f.t, f.pel, f.g, f.vp, f.vpp,
-                                     f.adhesive, lam, f.divisor)
-        curv += form
+        curv += f.half_space.begin_in_buffer(inverse=False)
     else:
         f.half_space.apply_in_buffer(inverse=False)
-        curv, slope, tmax, _ = _pass(_k.gcg_curvature, f.padded, f.t, f.pel, f.g, f.vp, f.vpp,
-                                     f.adhesive, lam, f.divisor)
+        curv += _pass(_k.gcg_image_sum, f.padded, f.t)
     curv, slope = global_sums(f.comm, curv, slope)
     return curv, slope, f.comm.allreduce(tmax, op=MPI.MAX)
 
@@ -429,17 +435,16 @@ def _advance(f, s, tau, restart, refresh_interval):
     mean-gap control), ``p_el`` evaluated afresh, and the recurrence restarts
     unless only the refresh was due (with ``two_level``, also when the projection put at
     most :data:`KEEP_FRACTION` of ``F`` at the wall).  Otherwise the inverse half of the
-    transform begun by :func:`_curvature` completes ``K t`` and
+    transform begun by :func:`_direction` completes ``K t`` and
     ``p_el += tau K t``.
     """
-    negative = f.comm.allreduce(_pass(_k.gcg_step, f.g, f.t, tau), op=MPI.SUM)
-    s.projected += negative > 0
+    negative, *positive = global_sums(f.comm, *_pass(_k.gcg_step, f.g, f.t, tau))
+    s.projected += bool(negative > 0)
     if negative > 0 or restart or s.since_fresh >= refresh_interval:
-        if f.load:
-            np.maximum(f.g, 0.0, out=f.g)
-            f.load_gap()
+        if f.load:  # g = max(g, 0), g + h into the FFT buffer in the same pass
+            _pass(_k.project_and_load, f.g, 0.0, f.h, f.padded)
         else:
-            _project_mean(f.grid, f.g, f.target, f.h, f.padded, f.comm)
+            _project_mean(f.grid, f.g, f.target, f.h, f.padded, f.comm, positive)
         f.fresh_pressure()
         s.fresh, s.since_fresh = True, 0
         s.beta_ok = negative <= f.keep * s.n_free and not restart
@@ -563,9 +568,7 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
         zshift, rz = _precondition(f, s)
         beta, zshift = _beta(f, s, rz, zshift)
         s.rz_old = rz
-        _pass(_k.gcg_direction, f.padded, f.pel, f.g, f.vp, f.adhesive, f.t, s.lam_f, zshift,
-              beta)
-        curv, slope, tmax = _curvature(f, s)
+        curv, slope, tmax = _direction(f, s, zshift, beta)
         if not slope < 0:
             if _restarted(f, s, beta):
                 continue

@@ -53,8 +53,10 @@ compliance of the cell's longest wave, and the springs give it the stiffness
 of the contact, which no fixed guess of it has (:mod:`petgap.solvers.gap_cg`).
 
 Cost per iteration: the springs and ``R r`` ride on the pass that writes the
-residual; one pass subtracts the prolongation; a few dozen transform pairs of
-the coarse grid, and no transform of the fine grid.  The springs on the contact set are estimated
+residual; one pass subtracts the prolongation; a transform pair of the coarse
+grid per coarse iteration (the coarse conjugate gradients run on the fields'
+``rfft2``, where ``H`` is a multiplier), and no transform of the fine grid.
+The springs on the contact set are estimated
 from its edge along the rows (:data:`EDGE_SPRING` per free neighbour), not from
 ``K 1_C`` (a transform pair whenever ``C`` changes): the iterations hardly
 change when the springs are halved or doubled, nor with ``K 1_C`` itself.
@@ -149,6 +151,8 @@ class CoarseTerm:
         self.symbol[0, 0] = mean_compliance
         self.edge = EDGE_SPRING * contact_modulus / np.sqrt(grid.dx * grid.dy)
         self.root_symbol = np.sqrt(self.symbol)   # H = Fc^{1/2}
+        # the rfft2 columns that are their own mirrors (Parseval's sums, _dot)
+        self.own_mirror = (0, -1) if self.coarse_shape[1] % 2 == 0 else (0,)
         self.springs = np.zeros(self.coarse_shape)
         self.rhs = np.zeros(self.coarse_shape)
         self.inner_iterations = self.clipped = 0
@@ -169,25 +173,39 @@ class CoarseTerm:
                            f.padded, self.edge, self.x0, self.block, local[0], local[1])
         self.springs, self.rhs = self._summed(local)
 
-    def _filter(self, y, symbol):
-        return np.fft.irfft2(np.fft.rfft2(y) * symbol, s=self.coarse_shape)
+    def _dot(self, a, b):
+        """``sum a b`` of two real coarse fields given by their ``rfft2`` (Parseval, up to ``1/N``).
+
+        The half plane holds every other column once and its mirror implicitly:
+        twice its sum, less the columns that are their own mirrors.
+        """
+        dot = 2.0 * np.vdot(a, b).real
+        for c in self.own_mirror:
+            dot -= np.vdot(a[:, c], b[:, c]).real
+        return float(dot)
 
     def _solve(self, springs, b):
-        """``(I + H W H)^{-1} b`` by conjugate gradients, or None where it is not positive."""
+        """``(I + H W H)^{-1} b`` by conjugate gradients, or None where it is not positive.
+
+        The vectors are kept as their ``rfft2`` (``b`` too): ``H`` is a multiplier
+        there and ``W`` one in real space, so an iteration costs one transform pair
+        of the coarse grid, and inner products are Parseval's over the half plane.
+        """
         x = np.zeros_like(b)
-        res, norm = b.copy(), float(np.sqrt(np.sum(b * b)))
+        res, norm = b.copy(), float(np.sqrt(self._dot(b, b)))
         if norm == 0.0:
             return x
         d, rr = res.copy(), norm * norm
         for _ in range(MAX_INNER):
-            ad = d + self._filter(springs * self._filter(d, self.root_symbol), self.root_symbol)
-            curvature = float(np.sum(d * ad))
+            wd = springs * np.fft.irfft2(self.root_symbol * d, s=self.coarse_shape)
+            ad = d + self.root_symbol * np.fft.rfft2(wd)
+            curvature = self._dot(d, ad)
             if not curvature > 0:
                 return None
             alpha = rr / curvature
             x += alpha * d
             res -= alpha * ad
-            rr_new = float(np.sum(res * res))
+            rr_new = self._dot(res, res)
             self.inner_iterations += 1
             if np.sqrt(rr_new) <= INNER_TOLERANCE * norm:
                 break
@@ -197,11 +215,12 @@ class CoarseTerm:
 
     def correct(self, padded):
         """Subtract ``P (Fc R r - H v)`` from ``K^{-1} r`` in the FFT buffer (module docstring)."""
-        hr = self._filter(self.rhs, self.root_symbol)
+        rhs = np.fft.rfft2(self.rhs)
+        hr = self.root_symbol * rhs
         v = self._solve(self.springs, hr)
         if v is None:
             # the softening outweighs the springs on some long wave: leave it out
             self.clipped += 1
             v = self._solve(np.maximum(self.springs, 0.0), hr)
-        y = self._filter(self.rhs, self.symbol) - self._filter(v, self.root_symbol)
-        _k.coarse_subtract(padded, self.grid.ny, np.ascontiguousarray(y), self.x0, self.block)
+        y = np.fft.irfft2(self.symbol * rhs - self.root_symbol * v, s=self.coarse_shape)
+        _k.coarse_subtract(padded, self.grid.ny, y, self.x0, self.block)

@@ -13,7 +13,10 @@ What is checked, and the scale every tolerance comes from:
   v(G) + w``, the largest attraction where the docstring puts it, the process zone
   ``E* w / max v'^2``;
 * the compiled kernel (``fill_stress``) against the NumPy ``v'`` and ``v''``
-  to a few units in the last place (different operation orders);
+  to a few units in the last place (different operation orders); the
+  exponential's own ``exp`` within two units of libm's (each within one of the
+  exact value) over the whole range, at its limits, and the same wherever a
+  value stands in a row (vectorised or not);
 * the registry: one name per law, the scene's kinds the same names, a law
   rebuilt from its file attributes and from a scene equal to itself.
 """
@@ -104,6 +107,35 @@ def test_compiled_kernel_is_the_law(law):
     else:  # the gap solver takes v'' = -v' / L
         np.testing.assert_allclose(-vp / law.curvature_from_stress, law.curvature(g), rtol=1e-15,
                                    atol=0)
+
+
+def test_exponential_kernel_is_exp_within_an_ulp_wherever_it_stands():
+    law = ExponentialAdhesion(1.0, 1.0)   # vp = exp(-g) exactly as the kernel forms it
+    rng = np.random.default_rng(7)
+    g = np.concatenate([np.linspace(0.0, 708.0, 7081), rng.exponential(5.0, 4000),
+                        rng.uniform(0.0, 0.35, 1000), [0.0, 1e-300, 0.5 * math.log(2)]])
+    vp = np.empty((1, g.size))
+    law.fill_stress(g.reshape(1, -1), vp)
+    libm = np.array([math.exp(-x) for x in g])
+    assert np.all(np.abs(vp[0] - libm) <= 2 * np.spacing(libm))
+    limits = np.array([[0.0, 708.5, 800.0, np.inf, np.nan, -800.0]])
+    out = np.empty_like(limits)
+    law.fill_stress(limits, out)
+    assert out[0, 0] == 1.0 and out[0, 1] == 0.0 and out[0, 2] == 0.0 and out[0, 3] == 0.0
+    assert np.isnan(out[0, 4]) and out[0, 5] == np.inf
+    # the same values at every alignment and in rows of other lengths: no lane or
+    # remainder of a vectorised loop gives a value of its own
+    row = rng.exponential(6.0, 203)
+    first = None
+    for offset in range(8):
+        for length in (203, 197, 5):
+            buffer, result = np.zeros(220), np.zeros(220)
+            buffer[offset:offset + 203] = row
+            law.fill_stress(buffer[offset:offset + length].reshape(1, -1),
+                            result[offset + 3:offset + 3 + length].reshape(1, -1))
+            values = result[offset + 3:offset + 3 + min(length, 5)]
+            first = values.copy() if first is None else first
+            assert np.array_equal(values, first)
 
 
 def test_hard_wall_is_no_interaction():

@@ -13,7 +13,7 @@ A law knows itself, so that no caller reads its parameters:
   one compiled pass that writes ``v'`` and, where the law needs one, ``v''``;
   ``curvature_from_stress`` says when it needs none: a length ``L`` with
   ``v'' = -v' / L`` (the exponential, ``L = rho``; ``inf`` for ``v'' = 0``),
-  which the solver's curvature pass applies to ``v'`` itself, so that no
+  which the solver's direction pass applies to ``v'`` itself, so that no
   ``v''`` field is held; a law whose ``v'`` jumps (``jumps``) also counts the
   points that crossed a jump since ``vp`` was last filled, on which the
   solver restarts;

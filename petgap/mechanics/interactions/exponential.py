@@ -5,7 +5,8 @@ Eq. 6): ``w`` the work of adhesion per unit area, ``rho`` its range.
 ``v'(g) = (w / rho) exp(-g / rho) > 0`` pulls the surfaces together, strongest
 at the wall (``w / rho``); ``v'' = -v' / rho < 0`` everywhere, so the problem is
 non-convex for small ``rho``, and the gap solver derives ``v''`` from ``v'`` in
-its curvature pass instead of holding a field of it.
+its direction pass (which sums the curvature along the direction) instead of
+holding a field of it.
 """
 import numpy as np
 
