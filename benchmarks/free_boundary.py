@@ -203,7 +203,6 @@ def main():
                               f" | - | P0 {c['load']:.6f}", flush=True)
         if args.tamaas and shape[0] == shape[1]:
             from contact import tamaas_python
-            n = shape[0]
             proc = subprocess.run([str(tamaas_python()), "-c", TAMAAS_DCFFT, str(path), str(LOAD),
                                    str(TOLERANCE)], capture_output=True, text=True, timeout=14400)
             text = proc.stdout + proc.stderr

@@ -25,7 +25,6 @@ from petgap.io.results import (OutputPathError, ResultExistsError, ResultFile,
 from petgap.io.lock import ResultLock, lock_path
 from petgap.io.scene import schema_default
 from petgap.mechanics import plausibility
-from petgap.mechanics.interactions import HardWall
 from petgap.mechanics.problem import Indentation, Load, MeanGap
 from petgap.parallel.collective import root_decides
 from petgap.solvers.convergence import ResidualTrend

@@ -14,7 +14,7 @@ import numpy as np
 from mpi4py import MPI
 
 from petgap.io.solver_registry import method
-from petgap.mechanics.problem import Load, MeanGap
+from petgap.mechanics.problem import Load
 from petgap.solvers.convergence import Timer
 from petgap.solvers.tao import tao_solve
 
