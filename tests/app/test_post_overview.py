@@ -173,3 +173,39 @@ def test_report_flags_steps_that_did_not_converge(tmp_path):
     assert "1 step(s) did not converge: a.h5:1" in page
     assert page.count('<tr class="failed">') == 2       # in the results and status tables
     assert "max_iterations" in page and "Every step converged" not in page
+
+
+UNRESOLVED = """
+[grid]
+nx = 48
+
+[surface]
+hurst = 0.8
+lambda_min = "4 a0"
+seed = 3
+
+[control]
+kind = "load"
+values = [0.01]
+
+[solver]
+planner = "estimate"
+"""
+
+
+def test_no_exponent_is_told_where_no_fit_range_qualified(comm, mpi_tmp_path, run_cli):
+    """Patches a few pixels across leave no range of x = g / g0 to fit: petgap-post warns
+    so, and its line for the step gives c, P_rep, d_rep and g0 but no exponent."""
+    scene = mpi_tmp_path / "unresolved.toml"
+    write_shared(comm, scene, UNRESOLVED)
+    run, out = mpi_tmp_path / "unresolved.h5", mpi_tmp_path / "post"
+    proc = run_cli(["petgap", "run", scene, "--output", run, "-q"], ranks=2)
+    assert proc.returncode == 0, proc.stderr
+    post = run_cli(["petgap-post", run, "-o", out], ranks=2)
+    assert post.returncode == 0, post.stderr
+    said = post.stdout + post.stderr
+    lines = [line for line in said.splitlines() if "step_0000" in line]
+    warned = [line for line in lines if "exponent fit range: no range" in line]
+    told = [line for line in lines if "c = " in line and "g0 = " in line]
+    assert warned and told, said
+    assert not any("exponent" in line for line in told), told
