@@ -12,9 +12,8 @@ its chain.
   found.  Both chains are stored, so the adhesive gap distributions can be
   normalised by the non-adhesive ``g0`` and ``c``, as in Fig. 3.  A list of
   works of adhesion repeats the adhesive steps once per ``w``, in the order
-  given, in the same chain: from non-sticky to sticky, each ``w`` starts from
-  the state of the one before at the same mean gap (continuation), and the
-  reference is solved once.
+  given, against the one reference; each ``w`` is a chain of its own
+  (:meth:`petgap.app.build.Model.sweep_steps`), started cold.
 """
 from dataclasses import dataclass
 from typing import Optional

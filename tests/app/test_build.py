@@ -273,6 +273,11 @@ def test_a_series_of_works_solves_one_reference_and_each_w_in_turn(comm):
         and problems[2] is not problems[4]
     assert all(p.half_space is model.half_space for p in problems)
     assert all(p.topography is model.topography for p in problems)
+    # each w is a chain of its own (started cold), its loads chained within it
+    chains = [s.chain for s in model.sweep_steps()]
+    assert chains[0] == chains[1] != chains[2]
+    assert chains[2] == chains[3] != chains[4] == chains[5] != chains[6] == chains[7]
+    assert len({chains[2], chains[4], chains[6]}) == 3
     stickiest = check_resolution(ExponentialAdhesion(4e-4, 1.0), 0.5, 2.0, "off")
     assert model.resolution["message"] == stickiest["message"]
     assert model.resolution["message"] != check_resolution(
