@@ -175,22 +175,8 @@ def test_report_flags_steps_that_did_not_converge(tmp_path):
     assert "max_iterations" in page and "Every step converged" not in page
 
 
-UNRESOLVED = """
-[grid]
-nx = 128
-
-[surface]
-hurst = 0.8
-lambda_min = "5 a0"
-seed = 3
-
-[control]
-kind = "load"
-values = [0.01]
-
-[solver]
-planner = "estimate"
-"""
+UNRESOLVED = ('[grid]\nnx = 128\n[surface]\nhurst = 0.8\nlambda_min = "5 a0"\nseed = 3\n'
+              '[control]\nkind = "load"\nvalues = [0.01]\n[solver]\nplanner = "estimate"\n')
 
 
 def test_no_exponent_is_told_where_no_fit_range_qualified(comm, mpi_tmp_path, run_cli):
