@@ -32,7 +32,7 @@ from petgap.io.scene import Scene, SceneError
 from petgap.mechanics.free_half_space import FreeHalfSpace
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics import plausibility
-from petgap.mechanics.interactions import HardWall, check_resolution, from_scene
+from petgap.mechanics.interactions import check_resolution, from_scene
 from petgap.mechanics.problem import ContactProblem
 from petgap.parallel.grid import Grid, check_decomposition
 from petgap.parallel.log import get_logger, timed
@@ -465,13 +465,9 @@ class Model:
                     options=self.options, precision=s.precision)
 
     def law_of(self, step):
-        """The interaction law a planned step solves with (the hard wall, the scene's law, or
-        its law at the step's own work of adhesion in a series)."""
-        if not step.adhesive:
-            return HardWall()
-        if step.work is None:
-            return self.interaction
-        return from_scene(self.scene.interaction, work=step.work)
+        """The interaction law a planned step solves with: its problem's (the hard wall, the
+        scene's law, or that law at the step's own work of adhesion in a series)."""
+        return self.problem_of(step).interaction
 
     def problem_of(self, step):
         """The problem a planned step solves."""
@@ -480,7 +476,8 @@ class Model:
         if step.work is None:
             return self.adhesive_problem
         if step.work not in self.series:   # the surface and half-space shared
-            self.series[step.work] = self.adhesive_problem.with_interaction(self.law_of(step))
+            law = from_scene(self.scene.interaction, work=step.work)
+            self.series[step.work] = self.adhesive_problem.with_interaction(law)
         return self.series[step.work]
 
     def sweep_steps(self, states=None):

@@ -3,7 +3,7 @@
 A cold gap solve (:func:`petgap.solvers.gap_cg.gap_cg`) starts from one of:
 
 * **the same solve on a grid twice as coarse** (:func:`coarse_start_gap`), on a
-  periodic cell whose sides allow it (:data:`MIN_SIDE`), unless
+  periodic cell (a free map's padded cell too) whose sides allow it (:data:`MIN_SIDE`), unless
   ``-petgap_coarse_start 0``.  Why: the two-level preconditioner
   (:mod:`petgap.solvers.gap_two_level`) makes each iteration's progress nearly
   independent of the grid, but a sticky interface starting from the rigid
@@ -59,8 +59,9 @@ def cold_start(problem, control, settings, solver):
 def coarse_start_gap(problem, control, settings, solver):
     """The gap of the same solve on a grid twice as coarse, prolonged (module docstring).
 
-    ``(None, "")`` where the grid is not coarsened (a free boundary's padded cell,
-    ``settings.coarse_start`` off, a shape without a level of :data:`MIN_SIDE`), or
+    ``(None, "")`` where the grid is not coarsened (a free map itself, whose gap
+    solves run on its padded cell, which is coarsened; ``settings.coarse_start`` off;
+    a shape without a level of :data:`MIN_SIDE`), or
     ``(None, why)`` when the coarse solve produced NaN.  The gap is on the fine grid's
     :meth:`~petgap.parallel.grid.Grid.scratch`: read it before the next transform.
     """
