@@ -116,11 +116,12 @@ class MapMeanGap:
     """
 
     def __init__(self, cell, map_shape, target, gap_scale, tolerance, cell_target,
-                 slope=1.0, forcing=3.0):
+                 slope=1.0, forcing=10.0):
         self.cell, self.map_shape = cell, map_shape
         self.target, self.gap_scale, self.tolerance = target, gap_scale, tolerance
         self.cell_target, self.slope, self.forcing = cell_target, slope, forcing
         self.last, self.moves, self.error = None, 0, None
+        self.before, self.last_step = None, None
 
     def map_mean(self, g):
         """The mean of the cell's gap ``g`` (this rank's slab) over the map's points."""
@@ -140,9 +141,23 @@ class MapMeanGap:
             measured = (mean - self.last[1]) / (self.cell_target - self.last[0])
             self.slope = measured if measured > 1e-3 else self.slope
         self.last = (self.cell_target, mean)
-        self.cell_target += (self.target - mean) / self.slope
+        step = (self.target - mean) / self.slope
+        self._predict(g, step)
+        self.cell_target += step
         self.moves += 1
         return self.cell_target
+
+    def _predict(self, g, step):
+        """Move ``g`` along the last move's response, scaled to ``step`` (in place)."""
+        if self.before is None:
+            self.before, self.last_step = g.copy(), step
+            return
+        diff = self.before
+        np.subtract(g, diff, out=diff)          # the last move's response (and progress)
+        diff *= step / self.last_step
+        g += diff
+        np.subtract(g, diff, out=diff)          # the state before this move
+        self.last_step = step
 
 
 def map_mean_gap(on_cell, map_shape, target, guess, settings, *, slope=1.0, initial_gap=None,
