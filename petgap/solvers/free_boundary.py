@@ -18,9 +18,15 @@ the cell's problem with the surface out of reach outside the map:
   compliance is the linear convolution of the free map (Hockney): the cell's solution
   restricted to the map is the free map's solution.
 * The cell's ``q = 0`` mode is the control's, as on any periodic cell: a map load
-  ``P0`` is the cell load ``P0 nx ny / (4 nx ny) = P0 / 4``; a mean gap of the map is
-  found by secant steps on the cell's mean gap, which differs from it by the gaps
-  outside (about ``far`` each, a quarter of the points being inside).
+  ``P0`` is the cell load ``P0 nx ny / (4 nx ny) = P0 / 4``.  A mean gap of the map is
+  not a constraint of the cell's energy: its multiplier would act on the map's points
+  alone, and the outside pressure would not vanish.  The cell keeps its own mean-gap
+  constraint (its multiplier a uniform pressure over the whole cell), and the map's mean
+  gap, which differs from the cell's by the gaps outside (about ``far`` each, a quarter
+  of the points being inside) and follows the map's pressure, moves the cell's target
+  during one gap solve (:class:`MapMeanGap`, :func:`map_mean_gap`); the coarse levels of
+  its start do the same on their maps.  The TAO solvers on the gap take secant steps of
+  whole cell solves instead (:meth:`PaddedCell._mean_gap`).
 * The KKT scales are the map's (:class:`~petgap.mechanics.problem.Scales`): the cell's
   problem is made with them, so that its residuals mean what they mean for the map.
 
@@ -116,7 +122,7 @@ class MapMeanGap:
     """
 
     def __init__(self, cell, map_shape, target, gap_scale, tolerance, cell_target,
-                 slope=1.0, forcing=10.0):
+                 slope=1.0, forcing=3.0):
         self.cell, self.map_shape = cell, map_shape
         self.target, self.gap_scale, self.tolerance = target, gap_scale, tolerance
         self.cell_target, self.slope, self.forcing = cell_target, slope, forcing
