@@ -54,7 +54,7 @@ def cpu(function):
 
 
 def _moves(solution):
-    """The free map's outer steps, as its start says them (1: one solve, no move)."""
+    """The free map's outer steps as its start says them: moves of its target, or secant solves."""
     found = re.search(r"moved its target (\d+) times|\((\d+) mean-gap solves\)", solution.start)
     return 0 if found is None else int(found.group(1) or found.group(2))
 
@@ -75,8 +75,8 @@ def free_rows(args):
         h = petgap.self_affine(grid, 0.8, 32.0, n / 2, rms_slope=0.1, seed=7)
         for w in args.work:
             cells = {}
-            for body in ("free", "periodic"):
-                half = petgap.FreeHalfSpace(grid) if body == "free" else petgap.ElasticHalfSpace(grid)
+            for body, half in (("free", petgap.FreeHalfSpace(grid)),
+                               ("periodic", petgap.ElasticHalfSpace(grid))):
                 hard = petgap.ContactProblem(grid, h, half)
                 reference, _ = run(hard, petgap.Load(0.002))
                 adhesive = hard.with_interaction(petgap.ExponentialAdhesion(w, args.range))
