@@ -113,21 +113,32 @@ class MapMeanGap:
     multiplier must stay a uniform pressure over the whole cell (the outside
     pressure vanishes only then).  So the cell keeps its own mean-gap constraint,
     and :func:`~petgap.solvers.gap_cg.gap_cg` asks this rule on every iteration
-    (its ``retarget``) whether to move it: once the KKT residual is below a fraction
-    ``forcing`` of the map's mean-gap error over ``h0`` (a residual ``r`` moves the
-    map's mean gap by about ``r h0``: the forcing term of an inexact Newton
-    method), the cell's target moves by a secant step on the map's mean gap
-    against the cell's, its slope measured between moves (``slope`` before the
-    second: the coarser level's, where there is one).  Collective.
+    (its ``retarget``) whether to move it.
+
+    * When: once the KKT residual is below ``forcing`` times the map's mean-gap
+      error over ``h0`` (the forcing term of an inexact Newton method).  The map's
+      mean gap of an iterate settles long before its residual does (a smooth
+      functional of the gap), so the move reads a nearly converged mean gap; read
+      earlier, on sticky maps, the secant's slopes go astray (docs/design.md).
+    * How far: a secant step on the map's mean gap against the cell's, its slope
+      measured between moves (``slope`` before the second: the coarser level's,
+      where there is one).
+    * How: from the second move on, the gap is first carried along the last move's
+      response, scaled to the new step (:meth:`_predict`); gap_cg then projects it onto
+      the new mean.  The first move is the projection's shift of the free points alone.
+
+    ``log``: a line per move (:func:`~petgap.solvers.progress.outer_step`), against the
+    solve's iteration limit ``bound`` (a move costs an iteration).  Collective.
     """
 
     def __init__(self, cell, map_shape, target, gap_scale, tolerance, cell_target,
-                 slope=1.0, forcing=3.0):
+                 slope=1.0, forcing=3.0, log=False, bound=None):
         self.cell, self.map_shape = cell, map_shape
         self.target, self.gap_scale, self.tolerance = target, gap_scale, tolerance
         self.cell_target, self.slope, self.forcing = cell_target, slope, forcing
         self.last, self.moves, self.error = None, 0, None
         self.before, self.last_step = None, None
+        self.timer, self.bound = (Timer() if log else None), bound
 
     def map_mean(self, g):
         """The mean of the cell's gap ``g`` (this rank's slab) over the map's points."""
@@ -151,10 +162,21 @@ class MapMeanGap:
         self._predict(g, step)
         self.cell_target += step
         self.moves += 1
+        if self.timer is not None:
+            outer_step("the map's mean gap on its padded cell", self.moves, self.bound,
+                       self.timer, f"mean gap off by {error:.3e} h0 (target "
+                       f"{self.tolerance:.0e}) at KKT residual {residual:.1e}: target moved")
         return self.cell_target
 
     def _predict(self, g, step):
-        """Move ``g`` along the last move's response, scaled to ``step`` (in place)."""
+        """Carry ``g`` along the last move's response, scaled to ``step`` (in place).
+
+        Why: the projection's uniform shift of the free points loads every contact
+        edge like a crack tip, and the residual rises to about ten times the step over
+        ``h0``; the state's own response to the last move, the difference of the gaps
+        before the two moves, is a secant predictor of the whole state, and the
+        residual barely rises.  Keeps the gap before this move (one cell field).
+        """
         if self.before is None:
             self.before, self.last_step = g.copy(), step
             return
@@ -167,7 +189,7 @@ class MapMeanGap:
 
 
 def map_mean_gap(on_cell, map_shape, target, guess, settings, *, slope=1.0, initial_gap=None,
-                 monitor=None):
+                 monitor=None, log=False):
     """The cell's gap solve whose map has mean gap ``target``: ``(solution, rule)``.
 
     One :func:`~petgap.solvers.gap_cg.gap_cg` solve with a moving cell target
@@ -192,9 +214,10 @@ def map_mean_gap(on_cell, map_shape, target, guess, settings, *, slope=1.0, init
         if found and initial_gap is not None:
             guess, slope = found[0].cell_target, found[0].slope
     rule = MapMeanGap(cell, map_shape, target, on_cell.gap_scale, settings.tolerance, guess,
-                      slope)
+                      slope, log=log, bound=settings.max_iterations)
     solution = gap_cg(on_cell, MeanGap(guess), settings, initial_gap=initial_gap,
                       monitor=monitor, retarget=rule)
+    rule.before = None  # the predictor's field: not kept with the solution
     if start:
         solution.start = "; ".join(filter(None, [start, solution.start]))
     return solution, rule
@@ -282,7 +305,7 @@ class PaddedCell:
             guess = target + (1 - fraction) * (problem.mean_height - h_out)
             slope, initial_gap = 1.0, None if warm is None else warm.gap
         solution, rule = map_mean_gap(on_cell, grid.shape, target, guess, settings, slope=slope,
-                                      initial_gap=initial_gap, monitor=monitor)
+                                      initial_gap=initial_gap, monitor=monitor, log=True)
         solution.map_rule = rule
         return solution, rule.moves
 

@@ -508,8 +508,9 @@ def _retargeted(f, s, retarget, residual):
     The extension point of a caller whose mean gap is a function of the state (a free
     map's mean gap on its padded cell, :mod:`petgap.solvers.free_boundary`): it is
     asked on every iteration, and a converged verdict stands only where it answers
-    None.  A moved constraint projects ``g`` onto it, evaluates ``p_el`` afresh and
-    restarts the recurrence: the old directions were conjugate on the old constraint.
+    None.  It may also change ``g`` in place (a predictor of the moved state).  A moved
+    constraint projects ``g`` onto it, evaluates ``p_el`` afresh and restarts the
+    recurrence: the old directions were conjugate on the old constraint.
     """
     moved = retarget(f.g, residual)
     if moved is None:
