@@ -18,9 +18,15 @@ the cell's problem with the surface out of reach outside the map:
   compliance is the linear convolution of the free map (Hockney): the cell's solution
   restricted to the map is the free map's solution.
 * The cell's ``q = 0`` mode is the control's, as on any periodic cell: a map load
-  ``P0`` is the cell load ``P0 nx ny / (4 nx ny) = P0 / 4``; a mean gap of the map is
-  found by secant steps on the cell's mean gap, which differs from it by the gaps
-  outside (about ``far`` each, a quarter of the points being inside).
+  ``P0`` is the cell load ``P0 nx ny / (4 nx ny) = P0 / 4``.  A mean gap of the map is
+  not a constraint of the cell's energy: its multiplier would act on the map's points
+  alone, and the outside pressure would not vanish.  The cell keeps its own mean-gap
+  constraint (its multiplier a uniform pressure over the whole cell), and the map's mean
+  gap, which differs from the cell's by the gaps outside (about ``far`` each, a quarter
+  of the points being inside) and follows the map's pressure, moves the cell's target
+  during one gap solve (:class:`MapMeanGap`, :func:`map_mean_gap`); the coarse levels of
+  its start do the same on their maps.  The TAO solvers on the gap take secant steps of
+  whole cell solves instead (:meth:`PaddedCell._mean_gap`).
 * The KKT scales are the map's (:class:`~petgap.mechanics.problem.Scales`): the cell's
   problem is made with them, so that its residuals mean what they mean for the map.
 
@@ -42,6 +48,8 @@ from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.collective import move_rows
 from petgap.solvers.convergence import Timer
 from petgap.solvers.control_loops import solve_as
+from petgap.solvers.gap_cg import gap_cg
+from petgap.solvers.gap_start import coarse_start_gap
 from petgap.solvers.progress import outer_step
 
 #: Interaction length scales between the cell's surface outside the map and the map's
@@ -96,6 +104,125 @@ def _step_tolerance(tolerance, error, forcing=0.1, loosest=1e-4):
     return max(tolerance, min(loosest, forcing * error))
 
 
+class MapMeanGap:
+    """The cell's mean gap that gives the map's mean gap ``target``, moved during one gap solve.
+
+    The map's mean gap is the cell's less the outside points' share, which follows
+    the map's pressure (the outside displacement is the compliance applied to it):
+    a function of the state, not a constraint of the cell's energy, whose
+    multiplier must stay a uniform pressure over the whole cell (the outside
+    pressure vanishes only then).  So the cell keeps its own mean-gap constraint,
+    and :func:`~petgap.solvers.gap_cg.gap_cg` asks this rule on every iteration
+    (its ``retarget``) whether to move it.
+
+    * When: once the KKT residual is below ``forcing`` times the map's mean-gap
+      error over ``h0`` (the forcing term of an inexact Newton method).  The map's
+      mean gap of an iterate settles long before its residual does (a smooth
+      functional of the gap), so the move reads a nearly converged mean gap; read
+      earlier, on sticky maps, the secant's slopes go astray (docs/design.md).
+    * How far: a secant step on the map's mean gap against the cell's, its slope
+      measured between moves (``slope`` before the second: the coarser level's,
+      where there is one).
+    * How: from the second move on, the gap is first carried along the last move's
+      response, scaled to the new step (:meth:`_predict`); gap_cg then projects it onto
+      the new mean.  The first move is the projection's shift of the free points alone.
+
+    ``log``: a line per move (:func:`~petgap.solvers.progress.outer_step`), against the
+    solve's iteration limit ``bound`` (a move costs an iteration).  Collective.
+    """
+
+    def __init__(self, cell, map_shape, target, gap_scale, tolerance, cell_target,
+                 slope=1.0, forcing=3.0, log=False, bound=None):
+        self.cell, self.map_shape = cell, map_shape
+        self.target, self.gap_scale, self.tolerance = target, gap_scale, tolerance
+        self.cell_target, self.slope, self.forcing = cell_target, slope, forcing
+        self.last, self.moves, self.error = None, 0, None
+        self.before, self.last_step = None, None
+        self.timer, self.bound = (Timer() if log else None), bound
+
+    def map_mean(self, g):
+        """The mean of the cell's gap ``g`` (this rank's slab) over the map's points."""
+        nx, ny = self.map_shape
+        rows = max(min(self.cell.x_slice.stop, nx) - self.cell.x_slice.start, 0)
+        local = float(g[:rows, :ny].sum(dtype=np.float64))
+        return self.cell.comm.allreduce(local) / (nx * ny)
+
+    def __call__(self, g, residual):
+        """The cell's new mean-gap target, or None to hold it (gap_cg's ``retarget``)."""
+        mean = self.map_mean(g)
+        self.error = (mean - self.target) / self.gap_scale
+        error = abs(self.error)
+        if error <= self.tolerance or residual > max(self.tolerance, self.forcing * error):
+            return None
+        if self.last is not None and self.cell_target != self.last[0]:
+            measured = (mean - self.last[1]) / (self.cell_target - self.last[0])
+            self.slope = measured if measured > 1e-3 else self.slope
+        self.last = (self.cell_target, mean)
+        step = (self.target - mean) / self.slope
+        self._predict(g, step)
+        self.cell_target += step
+        self.moves += 1
+        if self.timer is not None:
+            outer_step("the map's mean gap on its padded cell", self.moves, self.bound,
+                       self.timer, f"mean gap off by {error:.3e} h0 (target "
+                       f"{self.tolerance:.0e}) at KKT residual {residual:.1e}: target moved")
+        return self.cell_target
+
+    def _predict(self, g, step):
+        """Carry ``g`` along the last move's response, scaled to ``step`` (in place).
+
+        Why: the projection's uniform shift of the free points loads every contact
+        edge like a crack tip, and the residual rises to about ten times the step over
+        ``h0``; the state's own response to the last move, the difference of the gaps
+        before the two moves, is a secant predictor of the whole state, and the
+        residual barely rises.  Keeps the gap before this move (one cell field).
+        """
+        if self.before is None:
+            self.before, self.last_step = g.copy(), step
+            return
+        diff = self.before
+        np.subtract(g, diff, out=diff)          # the last move's response (and progress)
+        diff *= step / self.last_step
+        g += diff
+        np.subtract(g, diff, out=diff)          # the state before this move
+        self.last_step = step
+
+
+def map_mean_gap(on_cell, map_shape, target, guess, settings, *, slope=1.0, initial_gap=None,
+                 monitor=None, log=False):
+    """The cell's gap solve whose map has mean gap ``target``: ``(solution, rule)``.
+
+    One :func:`~petgap.solvers.gap_cg.gap_cg` solve with a moving cell target
+    (:class:`MapMeanGap`).  A cold solve starts as gap_cg's coarse-grid start would
+    (:func:`~petgap.solvers.gap_start.coarse_start_gap`), but each coarse level is this
+    same solve on its own map (the map's blocks): it finds the cell target and the
+    secant's slope on a quarter of the points, and the fine solve starts from both.
+    Collective.
+    """
+    cell = on_cell.grid
+    start = ""
+    if initial_gap is None:
+        found = []
+
+        def level(coarse_cell, control, coarse_settings):
+            f = cell.nx // coarse_cell.grid.nx
+            solution, rule = map_mean_gap(coarse_cell, (map_shape[0] // f, map_shape[1] // f),
+                                          target, control.mean_gap, coarse_settings, slope=slope)
+            found.append(rule)
+            return solution
+        initial_gap, start = coarse_start_gap(on_cell, MeanGap(guess), settings, level)
+        if found and initial_gap is not None:
+            guess, slope = found[0].cell_target, found[0].slope
+    rule = MapMeanGap(cell, map_shape, target, on_cell.gap_scale, settings.tolerance, guess,
+                      slope, log=log, bound=settings.max_iterations)
+    solution = gap_cg(on_cell, MeanGap(guess), settings, initial_gap=initial_gap,
+                      monitor=monitor, retarget=rule)
+    rule.before = None  # the predictor's field: not kept with the solution
+    if start:
+        solution.start = "; ".join(filter(None, [start, solution.start]))
+    return solution, rule
+
+
 class PaddedCell:
     """The free-boundary solver of the solvers on the gap: the map solved on its padded cell.
 
@@ -134,18 +261,53 @@ class PaddedCell:
             solves, history = 1, list(solution.history)
             iterations, converged, reason = solution.iterations, solution.converged, \
                 solution.reason
+            note = ""
+        elif isinstance(control, MeanGap) and kind == "pcg-gap":
+            solution, moves = self._moving_mean_gap(problem, on_cell, control, settings, warm,
+                                                    monitor)
+            solves, history = 1, list(solution.history)
+            iterations, converged, reason = solution.iterations, solution.converged, \
+                solution.reason
+            note = f" (the map's mean gap moved its target {moves} times)"
         elif isinstance(control, MeanGap):
             solution, solves, iterations, history, converged, reason = self._mean_gap(
                 problem, on_cell, control, kind, settings, warm, monitor)
+            note = f" ({solves} mean-gap solves)" if solves > 1 else ""
         else:
             raise ValueError(f"control {control!r}: a free boundary with adhesion takes load "
                              f"or mean-gap control")
-        mapped = self._on_map(problem, on_cell, control, solution, solves, timer,
+        mapped = self._on_map(problem, on_cell, control, solution, note, timer,
                               converged=converged, reason=reason, iterations=iterations,
                               history=history, start_ops=start_ops)
         mapped.negative_curvature_steps = solution.negative_curvature_steps
         mapped.cell_solution = solution
         return mapped
+
+    @staticmethod
+    def _moving_mean_gap(problem, on_cell, control, settings, warm, monitor):
+        """One gap solve whose cell target follows the map's mean gap (:func:`map_mean_gap`).
+
+        The first cell target takes the outside points' gaps as if ``u`` were the same
+        outside as inside; a warm start's takes its own cell target, moved by the map's
+        mean-gap error over its measured slope.  Returns the cell's solution (its
+        ``map_rule`` the rule, for the next warm start) and the moves of the target.
+        """
+        grid, cell = problem.grid, on_cell.grid
+        target = control.mean_gap
+        rule = getattr(warm, "map_rule", None)
+        if warm is not None and rule is not None:
+            guess = rule.cell_target + (target - rule.map_mean(warm.gap)) / rule.slope
+            slope, initial_gap = rule.slope, warm.gap
+        else:
+            h_out = grid.comm.allreduce(float(np.min(on_cell.topography, initial=np.inf)),
+                                        op=MPI.MIN)
+            fraction = grid.npoints / cell.npoints
+            guess = target + (1 - fraction) * (problem.mean_height - h_out)
+            slope, initial_gap = 1.0, None if warm is None else warm.gap
+        solution, rule = map_mean_gap(on_cell, grid.shape, target, guess, settings, slope=slope,
+                                      initial_gap=initial_gap, monitor=monitor, log=True)
+        solution.map_rule = rule
+        return solution, rule.moves
 
     def _mean_gap(self, problem, on_cell, control, kind, settings, warm, monitor):
         """Secant steps on the cell's mean gap until the map's is ``control``'s.
@@ -197,13 +359,12 @@ class PaddedCell:
         return solution, solves, iterations, history, converged, reason
 
     @staticmethod
-    def _on_map(problem, on_cell, control, solution, solves, timer, *, start_ops, **verdict):
+    def _on_map(problem, on_cell, control, solution, note, timer, *, start_ops, **verdict):
         """The map's solution from the cell's: its rows, judged as the map's."""
         grid, cell = problem.grid, on_cell.grid
         gap = _to_map(grid, cell, solution.gap)
         pressure = _to_map(grid, cell, solution.pressure)
-        start = "; ".join(filter(None, [f"solved on the {cell.nx}x{cell.ny} padded cell"
-                                        + (f" ({solves} mean-gap solves)" if solves > 1 else ""),
+        start = "; ".join(filter(None, [f"solved on the {cell.nx}x{cell.ny} padded cell" + note,
                                         solution.start]))
         # the rigid body's position d of g = d + u - h, with the map's own u = C p (the
         # cell's displacement lacks the mean its periodic q = 0 mode leaves to the control)

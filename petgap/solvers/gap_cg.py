@@ -502,8 +502,28 @@ def _control(problem, control):
     raise TypeError(f"unknown control {control!r}")
 
 
+def _retargeted(f, s, retarget, residual):
+    """Whether ``retarget`` moved the mean-gap constraint; if so, ``g`` is on the new one.
+
+    The extension point of a caller whose mean gap is a function of the state (a free
+    map's mean gap on its padded cell, :mod:`petgap.solvers.free_boundary`): it is
+    asked on every iteration, and a converged verdict stands only where it answers
+    None.  It may also change ``g`` in place (a predictor of the moved state).  A moved
+    constraint projects ``g`` onto it, evaluates ``p_el`` afresh and restarts the
+    recurrence: the old directions were conjugate on the old constraint.
+    """
+    moved = retarget(f.g, residual)
+    if moved is None:
+        return False
+    f.target = float(moved)
+    _project_mean(f.grid, f.g, f.target, f.h, f.padded, f.comm)
+    f.fresh_pressure()
+    s.fresh, s.since_fresh, s.beta_ok = True, 0, False
+    return True
+
+
 def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, monitor=None,
-           refresh_interval=50, two_level=None):
+           refresh_interval=50, two_level=None, retarget=None):
     """Solve hard-wall or adhesive contact on the gap, under load or mean-gap control.
 
     Parameters
@@ -524,6 +544,9 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
     two_level : bool, optional
         The coarse term in the preconditioner, conjugacy kept across projections and
         Polak-Ribiere+ (module docstring); ``settings.two_level`` by default.
+    retarget : callable, optional
+        Mean-gap control only: ``retarget(g, residual)`` returns a new mean gap to
+        hold from here on, or None (:func:`_retargeted`).
 
     Returns
     -------
@@ -534,6 +557,8 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
     two_level = settings.two_level if two_level is None else two_level
     timer = Timer()
     load, lam, target = _control(problem, control)
+    if retarget is not None and load:
+        raise ValueError("gap_cg: retarget moves a mean-gap constraint; load control has none")
     start_ops = problem.operator_applications
     if not load and target == 0.0:
         return _full_contact(problem, control, timer)
@@ -558,6 +583,9 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
             f.load_gap()
             f.fresh_pressure()
             s.fresh, s.since_fresh = True, 0
+            continue
+        if retarget is not None and verdict in ("", "converged_kkt") \
+                and _retargeted(f, s, retarget, residual):
             continue
         if verdict:
             converged, reason = verdict == "converged_kkt", verdict

@@ -335,3 +335,34 @@ def test_adhesive_free_map_under_mean_gap_and_on_any_rank_count(comm):
     _, _, alone = _adhesive_sphere(MPI.COMM_SELF, 64, "free")
     np.testing.assert_allclose(by_load.pressure, alone.pressure[grid.x_slice], rtol=0,
                                atol=1e-9 * np.abs(alone.pressure).max())
+
+
+def test_adhesive_free_mean_gap_is_one_solve(comm):
+    """A rough free map's adhesive mean gap is one gap solve on its padded cell, whose
+    mean-gap target follows the map's mean gap (free_boundary.MapMeanGap), within the
+    iterations of a few restarts beyond a load solve's; the secant of whole cell solves
+    took 81 on this map.  The state is the map's: its mean gap is the target to the
+    tolerance, the load it reports gives back that state under load control, and one rank
+    finds it as two do."""
+    def mean_gap_state(comm):
+        grid = Grid((128, 128), comm=comm, planner="estimate", wisdom=False)
+        h = petgap.self_affine(grid, 0.8, 8.0, 64.0, rms_slope=0.1, seed=7)
+        hard = petgap.ContactProblem(grid, h, FreeHalfSpace(grid))
+        reference = petgap.solve(hard, petgap.Load(0.002))
+        problem = hard.with_interaction(petgap.ExponentialAdhesion(0.05, 2.0))
+        return grid, problem, reference, petgap.solve(problem, petgap.MeanGap(reference.mean_gap))
+    grid, problem, reference, s = mean_gap_state(comm)
+    assert s.converged and s.iterations <= 45
+    assert "moved its target" in s.start
+    assert abs(s.mean_gap - reference.mean_gap) <= 1e-8 * problem.gap_scale
+    loaded = petgap.solve(problem, petgap.Load(s.mean_pressure))
+    _, _, _, alone = mean_gap_state(MPI.COMM_SELF)
+    # two states converged to the KKT tolerance 1e-8 lie within a displacement of a
+    # pressure error at the longest wave, 2e-8 h0' L / pi, and a pressure holding a gap
+    # error on one pixel, 2e-8 E* h0 / a0 (tests/solvers/test_adhesion.py's scales)
+    gap_bound = 2e-8 * max(problem.rms_slope * grid.Lx / np.pi, problem.gap_scale)
+    pressure_bound = 2e-8 * problem.gap_scale
+    assert loaded.converged and abs(loaded.mean_gap - s.mean_gap) <= gap_bound
+    for other in (loaded.pressure, alone.pressure[grid.x_slice]):
+        assert comm.allreduce(float(np.abs(other - s.pressure).max()),
+                              op=MPI.MAX) <= pressure_bound
