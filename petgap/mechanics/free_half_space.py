@@ -267,6 +267,11 @@ class FreeHalfSpace:
         """The same body under a map on another grid (a coarse start's)."""
         return FreeHalfSpace(grid, self.contact_modulus)
 
+    @staticmethod
+    def admits(shape):
+        """Whether the body can live under a map of ``shape`` (any map can)."""
+        return True
+
     @property
     def applications(self):
         """Applications of the compliance or of the preconditioning stiffness so far, in
@@ -409,7 +414,7 @@ class PaddedCellHalfSpace:
         contact_modulus = float(contact_modulus)
         if not (np.isfinite(contact_modulus) and contact_modulus > 0):
             raise ValueError(f"contact_modulus must be positive and finite, got {contact_modulus}")
-        if cell.nx % 2 or cell.ny % 2:
+        if not self.admits(cell.shape):
             raise ValueError(f"a padded cell has even sides, not {cell.nx} x {cell.ny}")
         self.grid, self.contact_modulus = cell, contact_modulus
         kernel = padded_kernel(cell, contact_modulus)
@@ -429,6 +434,15 @@ class PaddedCellHalfSpace:
     def on_grid(self, grid):
         """The padded cell of the map on a coarser grid (a coarse start's)."""
         return PaddedCellHalfSpace(grid, self.contact_modulus)
+
+    @staticmethod
+    def admits(shape):
+        """Whether ``shape`` is a padded cell: even sides, twice a map's.
+
+        Why it matters to a coarse start: the cell of a map with an odd side coarsens
+        to odd sides, whose blocks would straddle the map's edge.
+        """
+        return shape[0] % 2 == 0 and shape[1] % 2 == 0
 
     @property
     def applications(self):

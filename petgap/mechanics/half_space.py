@@ -73,6 +73,11 @@ class ElasticHalfSpace:
         """The same body on another grid (a coarse start's)."""
         return ElasticHalfSpace(grid, self.contact_modulus)
 
+    @staticmethod
+    def admits(shape):
+        """Whether the body can live on a grid of ``shape`` (any periodic cell can)."""
+        return True
+
     @property
     def applications(self):
         """Applications of ``K`` or ``K^{-1}`` (dense or sparse) so far, on this rank, in

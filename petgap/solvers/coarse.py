@@ -87,7 +87,8 @@ def coarsening_factor(shape):
 
 
 def coarse_problem(problem, precision=None, scales=None):
-    """The block-averaged problem on the coarse grid, or None if the shape has none.
+    """The block-averaged problem on the coarse grid, or None if the shape has none
+    (or the body cannot live on it: :meth:`admits`).
 
     Collective.  Made anew on every call (the caller drops it after the start);
     about ``1/f^2`` of the fine problem's memory.  ``precision``: the coarse
@@ -103,6 +104,8 @@ def coarse_problem(problem, precision=None, scales=None):
     if precision is None:
         precision = "single" if problem.half_space.periodic else grid.precision
     shape = (grid.nx // f, grid.ny // f)
+    if not problem.half_space.admits(shape):
+        return None   # e.g. the padded cell of a map with an odd side
     whole = grid.comm.size > 1 and shape[0] * shape[1] <= WHOLE_POINTS
     try:
         cgrid = Grid(shape, size=(grid.Lx, grid.Ly), comm=MPI.COMM_SELF if whole else grid.comm,

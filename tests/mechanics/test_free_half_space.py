@@ -366,3 +366,24 @@ def test_adhesive_free_mean_gap_is_one_solve(comm):
     for other in (loaded.pressure, alone.pressure[grid.x_slice]):
         assert comm.allreduce(float(np.abs(other - s.pressure).max()),
                               op=MPI.MAX) <= pressure_bound
+
+
+def test_adhesive_free_map_with_an_odd_side(comm):
+    """A map with an odd side has a padded cell that does not coarsen (its blocks would
+    straddle the map's edge): the gap solve starts without the coarse level, and a map with
+    even sides keeps it."""
+    from petgap.solvers import coarse
+    from petgap.solvers.free_boundary import cell_problem
+    law = petgap.ExponentialAdhesion(0.02, 1.0)
+    levels = {}
+    for shape in ((257, 258), (258, 258)):
+        grid = Grid(shape, comm=comm, planner="estimate", wisdom=False)
+        problem = petgap.ContactProblem(grid, indenter(grid, "paraboloid", 800.0),
+                                        FreeHalfSpace(grid), law)
+        levels[shape] = coarse.coarse_problem(cell_problem(problem))
+    assert levels[(257, 258)] is None and levels[(258, 258)] is not None
+    grid = Grid((257, 258), comm=comm, planner="estimate", wisdom=False)
+    problem = petgap.ContactProblem(grid, indenter(grid, "paraboloid", 800.0),
+                                    FreeHalfSpace(grid), law)
+    s = petgap.solve(problem, petgap.Load(16.0 / grid.area))
+    assert s.converged and s.contact_fraction > 0
