@@ -45,7 +45,10 @@ def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *
     pressure of a load solve is, and the fine grid takes a few steps from near
     the answer.  Without a coarse grid (or a cold start asked off) the first
     depth is the rigid estimate ``u = 0`` with slope -1, which lies below the
-    answer since ``u >= 0`` under compression.  The solves before the last are
+    answer since ``u >= 0`` under compression.  The fine grid's first step takes the
+    slope ``mean(u) d log P0 / dd - 1`` from its own ``mean(u)`` and the coarse grid's
+    load response, which the discretisation moves less than the coarse mean gap's
+    slope.  The solves before the last are
     inexact, to :data:`TOLERANCE_SHARE` of the last mean-gap error (the first to
     the coarse tolerance).  Stops when ``|m - g_bar| <= tolerance h0`` after a
     solve to the tolerance; a solve that fails, or ``max_solves`` steps, ends it
@@ -135,6 +138,11 @@ class _Secant:
                 slope = min((solution.mean_gap - previous[1]) / (depth - previous[0]), -1e-12)
                 self.pressure_slope = (pressure - previous[2]) / (depth - previous[0])
                 self.load_slope = (solution.mean_pressure / previous[3] - 1) / (depth - previous[0])
+            elif self.load_slope is not None:
+                # one fine solve: m = mean(u) - mean(h) + top - d with mean(u) proportional
+                # to the load, whose response d log P0 / dd the coarse grid measured
+                mean_u = solution.mean_gap + problem.mean_height - problem.top_height + depth
+                slope = min(mean_u * self.load_slope - 1.0, -1e-12)
             self.slope = slope
             previous = (depth, solution.mean_gap, pressure, solution.mean_pressure)
             step = excess / -slope
