@@ -137,7 +137,9 @@ class _Secant:
             if previous is not None and depth != previous[0]:
                 slope = min((solution.mean_gap - previous[1]) / (depth - previous[0]), -1e-12)
                 self.pressure_slope = (pressure - previous[2]) / (depth - previous[0])
-                self.load_slope = (solution.mean_pressure / previous[3] - 1) / (depth - previous[0])
+                if previous[3] > 0:   # a depth short of contact carries no load to scale
+                    self.load_slope = (solution.mean_pressure / previous[3] - 1) \
+                        / (depth - previous[0])
             elif self.load_slope is not None:
                 # one fine solve: m = mean(u) - mean(h) + top - d with mean(u) proportional
                 # to the load, whose response d log P0 / dd the coarse grid measured

@@ -8,8 +8,9 @@ one subprocess: the hard wall under load (pressure CG from the coarse start), th
 adhesive contact under mean gap (gap CG), and on a free boundary the hard wall under
 load, under indentation and under mean gap (the indentation's secant on the depth,
 level by level), and an adhesive sphere on a 62 x 60 map under load (on its padded
-cell, 124 x 120, in blocks of 8 rows at 16 ranks); the fields, iteration counts and scalars must equal
-the one-rank solves to round-off (the decompositions only reorder sums).
+cell, 124 x 120, in blocks of 8 rows at 16 ranks); the fields, iteration counts and
+scalars must equal the one-rank solves to round-off (the decompositions only reorder
+sums).
 """
 import json
 import sys
