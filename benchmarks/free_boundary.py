@@ -9,7 +9,8 @@ pruned transform).  Printed per size and rank count: iterations, applications of
 elastic operator, wall time of the solve (coarse start included), time per iteration, the
 FFTW-MPI pair floor of ``n^2`` and ``(2n)^2`` measured in the same run
 (benchmarks/fft_floor.c), the free operator's pruned pair (``C p`` of a whole field,
-median of 5) in ms and in ``n^2`` floor pairs, the free solve's wall time, CPU time
+median of 5, into a field of its own as the solvers apply it; wall and CPU) in ms and
+in ``n^2`` floor pairs, the free solve's wall time, CPU time
 (summed over the ranks: on a shared machine it moves less with the other jobs than the
 wall time) and iterations over the periodic one's, and the peak memory per map point (peak RSS less the RSS before the
 grid, summed over ranks; each boundary solved in a process of its own).
@@ -21,7 +22,9 @@ iterations and times (in the free solve's process, after its memory is taken).
 
 With ``--tamaas`` the free map is also solved by Tamaas 2.9's ``PolonskyKeerRey`` with its
 non-periodic ``dcfft`` operator (one process, in its own venv as in benchmarks/contact.py),
-to the same load and its own tolerance 1e-8, with the contact fraction of both.
+to the same load and its own tolerance 1e-8, with the contact fraction of both and their
+fields compared: the points in contact in one solution only (over the points in contact
+in petgap's), and the largest pressure difference over petgap's largest pressure.
 
 Usage::
 
@@ -56,6 +59,7 @@ solver.setIntegralOperator("dcfft")
 solver.max_iter = 100000
 t = time.perf_counter(); solver.solve(load); dt = time.perf_counter() - t
 p = np.array(model.traction).reshape(n, n)
+np.save(path + ".tamaas.npy", p)
 print("TAMAAS " + json.dumps({"time": dt, "contact_fraction": float((p > 0).mean()),
                               "mean_pressure": float(p.mean()), "error": float(solver.computeError())}))
 '''
@@ -71,7 +75,7 @@ def _timed(comm, func):
     return result, time.perf_counter() - t, comm.allreduce(cpu)
 
 
-def worker(shape, size, path, boundary, controls):
+def worker(shape, size, path, boundary, controls, save=False):
     """Solve the map on COMM_WORLD periodic or free; print one JSON line (rank 0)."""
     import resource
     import numpy as np
@@ -89,10 +93,18 @@ def worker(shape, size, path, boundary, controls):
     result = {"iterations": s.iterations, "applications": s.operator_applications, "time": dt,
               "cpu": cpu, "converged": s.converged, "c": s.contact_fraction,
               "bytes": peak / grid.npoints}
+    if save:   # the pressure field, for the comparison with Tamaas'
+        pressure = grid.gather(s.pressure)
+        if comm.rank == 0:
+            np.save(path + ".free.npy", pressure)
     if boundary == "free":
+        # into a field of its own, as the solvers apply it: a new result each time would
+        # add the first touch of its pages (8 B/pt), which grows with the machine's load
         field = np.random.default_rng(comm.rank).random(grid.local_shape)
-        pairs = [_timed(comm, lambda: body.displacement(field))[1] for _ in range(6)]
-        result["pair"] = float(np.median(pairs[1:]))
+        out = np.empty_like(field)
+        pairs = [_timed(comm, lambda: body.displacement(field, out)) for _ in range(6)]
+        result["pair"] = float(np.median([wall for _, wall, _ in pairs[1:]]))
+        result["pair_cpu"] = float(np.median([cpu for _, _, cpu in pairs[1:]]))
     if boundary == "free" and controls:
         u = body.displacement(s.pressure)
         depth = problem.top_height - grid.sum(s.gap + h - u) / grid.npoints
@@ -114,16 +126,27 @@ def make_surface(shape, size, path):
     np.save(path, h)
 
 
+def _compare(path):
+    """Contact sets and pressures of petgap's free solve and Tamaas' of the map, in words."""
+    import numpy as np
+    ours, theirs = np.load(path + ".free.npy"), np.load(path + ".tamaas.npy")
+    a, b = ours > 0, theirs > 0
+    return (f"{np.count_nonzero(a & ~b)} points in contact in petgap's only, "
+            f"{np.count_nonzero(b & ~a)} in Tamaas' only (of {np.count_nonzero(a)}); "
+            f"max |p - p_Tamaas| = {np.abs(ours - theirs).max() / ours.max():.2e} max p")
+
+
 def _pair(text):
     a, b = text.lower().split("x")
     return a, b
 
 
-def _run(ranks, shape, size, path, boundary, controls, env):
+def _run(ranks, shape, size, path, boundary, controls, env, save=False):
     command = ["mpirun", "-n", str(ranks), "--oversubscribe", sys.executable, __file__,
                "--worker", "--shape", "x".join(map(str, shape)),
                "--pixel", "x".join(str(size[i] / shape[i]) for i in range(2)), "--map", str(path),
-               "--boundary", boundary] + (["--controls"] if controls else [])
+               "--boundary", boundary] + (["--controls"] if controls else []) \
+        + (["--save"] if save else [])
     proc = subprocess.run(command, capture_output=True, text=True, env=env, timeout=14400)
     if "RESULT " not in proc.stdout:
         print(proc.stdout[-2000:], proc.stderr[-2000:])
@@ -143,6 +166,7 @@ def main():
     parser.add_argument("--controls", action="store_true",
                         help="also indentation and mean gap on the free map")
     parser.add_argument("--tamaas", action="store_true")
+    parser.add_argument("--save", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.shape is not None:
         shapes = [tuple(int(v) for v in args.shape)]
@@ -152,7 +176,7 @@ def main():
     if args.worker:
         shape = shapes[0]
         return worker(shape, (shape[0] * pixel[0], shape[1] * pixel[1]), args.map, args.boundary,
-                      args.controls)
+                      args.controls, args.save)
     from floor import fft_floor
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     work = Path(tempfile.mkdtemp(prefix="petgap-free-bench-"))
@@ -174,7 +198,8 @@ def main():
             # beyond 8192^2 FFTW's measuring planner takes longer than the solves
             large = fft_floor(2 * shape[0], ranks) if square and shape[0] <= 4096 else None
             periodic = _run(ranks, shape, size, path, "periodic", False, env)
-            free = _run(ranks, shape, size, path, "free", args.controls, env)
+            free = _run(ranks, shape, size, path, "free", args.controls, env,
+                        save=args.tamaas and ranks == 1)
             for boundary, r in (("periodic", periodic), ("free", free)):
                 if r is None:
                     continue
@@ -189,7 +214,8 @@ def main():
                     name, ranks, boundary, r["iterations"], r["applications"],
                     f"{r['time']:.3f}", f"{r['cpu']:.3f}",
                     f"{1e3 * r['time'] / max(r['iterations'], 1):.1f}",
-                    ms(small), ms(large), ms(pair),
+                    ms(small), ms(large),
+                    ms(pair) + (f" (CPU {r['pair_cpu'] * 1e3:.1f})" if pair is not None else ""),
                     "-" if pair is None or small is None else f"{pair / small:.2f}",
                     *ratios, f"{r['bytes']:.0f}", f"{r['c']:.4f}")), flush=True)
                 for control in ("indentation", "mean-gap"):
@@ -213,6 +239,9 @@ def main():
             print(f"{name} | 1 | Tamaas dcfft | - | - | {t['time']:.3f} | - | - | - | - | - | - |"
                   f" {t['time'] / free['time'] if free else float('nan'):.1f} (Tamaas / free) | "
                   f"- | - | - | {t['contact_fraction']:.4f}", flush=True)
+            print(f"{name}: Tamaas' fields against petgap's free solve: "
+                  + _compare(str(path)),
+                  flush=True)
 
 
 if __name__ == "__main__":

@@ -45,6 +45,21 @@ def judge(residual, tolerance, fresh, iteration, max_iterations, history, monito
     return ""
 
 
+def secant_tolerance(tolerance, error, forcing, loosest):
+    """KKT tolerance of the next inner solve of an inexact secant on a control (unit-free).
+
+    Why: a solve's KKT residual ``r`` moves the mean gap it is judged by by about
+    ``r h0``, so a step that has a mean-gap error ``error h0`` left to remove needs
+    its solve only to a fraction ``forcing`` of it (as inexact Newton methods
+    choose their forcing terms), never looser than ``loosest`` and never tighter
+    than ``tolerance``, which the last solve meets.  The first solve, whose error
+    is not known yet (``error`` None), goes to ``loosest``.
+    """
+    if error is None:
+        return max(tolerance, loosest)
+    return max(tolerance, min(loosest, forcing * abs(error)))
+
+
 class Timer:
     """Wall-clock seconds since construction (``time.perf_counter``)."""
 

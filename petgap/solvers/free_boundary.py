@@ -46,7 +46,7 @@ from mpi4py import MPI
 from petgap.mechanics.free_half_space import PaddedCellHalfSpace
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.collective import move_rows
-from petgap.solvers.convergence import Timer
+from petgap.solvers.convergence import Timer, secant_tolerance
 from petgap.solvers.control_loops import solve_as
 from petgap.solvers.gap_cg import gap_cg
 from petgap.solvers.gap_start import coarse_start_gap
@@ -89,19 +89,9 @@ def _to_map(grid, cell, field):
     return out
 
 
-def _step_tolerance(tolerance, error, forcing=0.1, loosest=1e-4):
-    """KKT tolerance of the next cell solve of the mean-gap secant (unit-free).
-
-    Why: a solve's residual moves the map's mean gap by about that residual
-    times ``h0`` (the problem's gap scale), so a step that still has a mean-gap
-    error ``error h0`` to remove needs its solve only to a fraction ``forcing``
-    of it (an inexact secant, as inexact Newton methods choose their forcing
-    terms), and never tighter than ``tolerance``, which the last solve meets.
-    The first solve, whose error is not known yet, goes to ``loosest``.
-    """
-    if error is None:
-        return max(tolerance, loosest)
-    return max(tolerance, min(loosest, forcing * error))
+#: The mean-gap secant's inner solves (:func:`~petgap.solvers.convergence.secant_tolerance`):
+#: each to a tenth of the mean-gap error left, the first to 1e-4.
+SECANT_FORCING, SECANT_LOOSEST = 0.1, 1e-4
 
 
 class MapMeanGap:
@@ -315,8 +305,8 @@ class PaddedCell:
         The cell's mean gap less the map's is the outside points' share, estimated
         first as if ``u`` were the same outside as inside (the secant steps correct it).
         The steps are inexact: a solve is taken only as far as the step it serves
-        needs (:func:`_step_tolerance`), and the answer is a solve to the whole
-        tolerance whose map mean gap meets the target.  Returns the last cell
+        needs (:func:`~petgap.solvers.convergence.secant_tolerance`), and the answer
+        is a solve to the whole tolerance whose map mean gap meets the target.  Returns the last cell
         solution, the solves, iterations and history summed, and the verdict.
         """
         grid, cell = problem.grid, on_cell.grid
@@ -327,7 +317,7 @@ class PaddedCell:
         guess = target + (1 - fraction) * (problem.mean_height - h_out)
         previous, solves, iterations, history = None, 0, 0, []
         converged, reason = False, "max_solves"
-        inner = _step_tolerance(settings.tolerance, None)
+        inner = secant_tolerance(settings.tolerance, None, SECANT_FORCING, SECANT_LOOSEST)
         timer = Timer()
         while solves < self.max_solves:
             solution = solve_as(on_cell, MeanGap(guess), kind, settings.but(tolerance=inner),
@@ -348,7 +338,7 @@ class PaddedCell:
             if error <= settings.tolerance and inner <= settings.tolerance:
                 converged, reason = True, solution.reason
                 break
-            inner = _step_tolerance(settings.tolerance, error)
+            inner = secant_tolerance(settings.tolerance, error, SECANT_FORCING, SECANT_LOOSEST)
             slope = 1.0
             if previous is not None and guess != previous[0]:
                 slope = (mean - previous[1]) / (guess - previous[0])

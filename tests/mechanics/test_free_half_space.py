@@ -387,3 +387,17 @@ def test_adhesive_free_map_with_an_odd_side(comm):
                                     FreeHalfSpace(grid), law)
     s = petgap.solve(problem, petgap.Load(16.0 / grid.area))
     assert s.converged and s.contact_fraction > 0
+
+
+def test_free_mean_gap_costs_at_most_two_load_solves(comm):
+    """The mean gap of a rough free map by the depth's secant: its re-solves start from the
+    pressure moved along the secant, so the whole costs at most twice the iterations of the
+    load solve with that mean gap."""
+    grid = Grid((128, 128), comm=comm, planner="estimate", wisdom=False)
+    h = petgap.self_affine(grid, 0.8, 16.0, grid.Lx / 2, rms_slope=0.1, seed=1)
+    problem = petgap.ContactProblem(grid, h, FreeHalfSpace(grid))
+    by_load = petgap.solve(problem, petgap.Load(0.002), tolerance=1e-8)
+    s = petgap.solve(problem, petgap.MeanGap(by_load.mean_gap), tolerance=1e-8)
+    assert s.converged and s.mean_gap == pytest.approx(by_load.mean_gap, rel=1e-8)
+    assert s.mean_pressure == pytest.approx(by_load.mean_pressure, rel=1e-6)
+    assert s.iterations <= 2 * by_load.iterations, (s.iterations, by_load.iterations)

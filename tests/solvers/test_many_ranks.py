@@ -5,9 +5,12 @@ one of 2, and 12 Fourier rows and one of 1; its coarse start (121 x 90, odd) and
 free boundary's padded cell (484 x 360) split unevenly too, and rows cross between
 the map's and the cell's decompositions on every application.  Each run solves, in
 one subprocess: the hard wall under load (pressure CG from the coarse start), the
-adhesive contact under mean gap (gap CG), and the hard wall on a free boundary under
-load; the fields, iteration counts and scalars must equal the one-rank solves to
-round-off (the decompositions only reorder sums).
+adhesive contact under mean gap (gap CG), and on a free boundary the hard wall under
+load, under indentation and under mean gap (the indentation's secant on the depth,
+level by level), and an adhesive sphere on a 62 x 60 map under load (on its padded
+cell, 124 x 120, in blocks of 8 rows at 16 ranks); the fields, iteration counts and
+scalars must equal the one-rank solves to round-off (the decompositions only reorder
+sums).
 """
 import json
 import sys
@@ -24,6 +27,7 @@ SCRIPT = textwrap.dedent("""
     import numpy as np
     from mpi4py import MPI
     import petgap
+    from petgap.surfaces.indenters import indenter
 
     out = Path(sys.argv[1])
     comm = MPI.COMM_WORLD
@@ -31,11 +35,18 @@ SCRIPT = textwrap.dedent("""
                        planner="estimate", wisdom=False)
     h = petgap.self_affine(grid, 0.7, 6.0, rms_slope=0.1, seed=5)
     law = petgap.ExponentialAdhesion(2e-4, 1.0)
-    cases = [(petgap.ElasticHalfSpace(grid), None, petgap.Load(0.004)),
-             (petgap.ElasticHalfSpace(grid), law, petgap.MeanGap(0.15)),
-             (petgap.FreeHalfSpace(grid), None, petgap.Load(0.004))]
-    for k, (body, interaction, control) in enumerate(cases):
-        problem = petgap.ContactProblem(grid, h, body, interaction)
+    sphere_grid = petgap.Grid((62, 60), comm=comm, planner="estimate", wisdom=False)
+    sphere = indenter(sphere_grid, "paraboloid", 200.0)
+    cases = [(petgap.ElasticHalfSpace(grid), h, None, petgap.Load(0.004)),
+             (petgap.ElasticHalfSpace(grid), h, law, petgap.MeanGap(0.15)),
+             (petgap.FreeHalfSpace(grid), h, None, petgap.Load(0.004)),
+             (petgap.FreeHalfSpace(grid), h, None, petgap.Indentation(1.261)),
+             (petgap.FreeHalfSpace(grid), h, None, petgap.MeanGap(0.758)),
+             (petgap.FreeHalfSpace(sphere_grid), sphere, petgap.ExponentialAdhesion(0.02, 1.0),
+              petgap.Load(4.096 / sphere_grid.area))]
+    for k, (body, heights, interaction, control) in enumerate(cases):
+        grid = body.grid
+        problem = petgap.ContactProblem(grid, heights, body, interaction)
         sol = petgap.solve(problem, control, tolerance=1e-10)
         fields = {"gap": grid.gather(sol.gap), "pressure": grid.gather(sol.pressure)}
         if comm.rank == 0:
@@ -57,7 +68,7 @@ def test_many_ranks_equal_one(comm, mpi_tmp_path, run_cli, ranks):
                    ranks=ranks, timeout=600)
     assert one.returncode == 0, one.stderr[-3000:]
     assert many.returncode == 0, many.stderr[-3000:]
-    for k in range(3):
+    for k in range(6):
         one_case = np.load(mpi_tmp_path / f"case{k}-1.npz")
         many_case = np.load(mpi_tmp_path / f"case{k}-{ranks}.npz")
         a, b = (json.loads(str(case["scalars"])) for case in (one_case, many_case))
