@@ -61,8 +61,14 @@ RTOL = 1e-10
 #: PETSc has hypre (Debian's does), which takes fewer iterations and less time than GAMG
 #: on the gap fields of rough contacts (docs/benchmarks.md), else PETSc's own GAMG.
 PC_TYPE = "hypre" if PETSc.Sys.hasExternalPackage("hypre") else "gamg"
-#: BoomerAMG's settings unless given (``-flow_pc_hypre_boomeramg_*``): see docs/design.md.
-HYPRE_OPTIONS = {}
+#: BoomerAMG's settings unless given (``-flow_pc_hypre_boomeramg_*``): HMIS coarsening,
+#: aggressive on the first level, with extended+i interpolation of at most 4 entries a
+#: row, which keep the hierarchy small; docs/design.md has the trade against hypre's own
+#: defaults (Falgout coarsening, classical interpolation).
+HYPRE_OPTIONS = {"pc_hypre_boomeramg_coarsen_type": "HMIS",
+                 "pc_hypre_boomeramg_interp_type": "ext+i",
+                 "pc_hypre_boomeramg_P_max": "4",
+                 "pc_hypre_boomeramg_agg_nl": "1"}
 
 
 def harmonic_mean(a, b, out=None):
