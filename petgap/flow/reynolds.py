@@ -32,11 +32,15 @@ Boundaries
 
 Only the clusters that span the map (:mod:`petgap.analysis.percolation`) take part; other
 open pixels are sealed pockets or dead ends without flow, and would leave the matrix
-singular.  Their rows, and those of closed pixels, are the identity, so the matrix is
-laid out over petgap's own row slabs, each rank owning the rows ``i * ny + j`` of its
-pixels: the vectors are the slabs themselves, with no scatter.  (A DMDA would need
-its own copy of the slab layout; an AIJ matrix over the slab's rows takes the FFTW-MPI
-decomposition as it is, uneven blocks included.)
+singular.  They, the closed pixels and the pinned ones are eliminated: the unknowns are
+the open pixels of the spanning clusters alone (:class:`Unknowns`), numbered in the order
+of the global pixel index, so each rank owns the contiguous range of its own slab's and
+the vectors are the slab's unknowns in place, with no scatter.  (A DMDA would need its own
+copy of the slab layout and would keep every closed pixel as an unknown; identity rows for
+them would cost memory in the matrix and in every level of the multigrid hierarchy.)
+The matrix is assembled straight into PETSc's MPIAIJ format, preallocated exactly and
+filled a block of rows at a time (:func:`assemble`), in PETSc's index type (32 bits in
+Debian's build).
 
 The linear system is scaled: the unknown is the pressure over ``dp``, the conductances
 ``g^3`` over the largest ``g^3`` of the map, so the matrix has entries of order one
