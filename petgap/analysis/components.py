@@ -140,6 +140,7 @@ def _touching_pairs(grid, labels, periodic):
 def _first_pixels(labels, offset, count, base):
     """The smallest global pixel index of each of this rank's labels ``offset + 1 ..
     offset + count``, found a block of rows at a time (no slab-sized index array)."""
+    # deferred: importing SciPy changes warning filters, which `import petgap` must not do
     from scipy import ndimage
 
     nloc, ny = labels.shape
