@@ -13,8 +13,8 @@ KSP solve (set-up included), the peak memory the flow step adds in bytes per poi
 the contact solve's seconds beside them.
 
 A size whose flow step would not fit is not run: before each size the memory it needs
-is projected from the largest flow step measured so far (bytes per point, plus the
-contact's) and compared with the machine's available memory (``MemAvailable``), so a
+is projected from the flow step of the largest grid measured so far (bytes per point,
+which fall towards a constant as the grid grows, plus the contact's) and compared with the machine's available memory (``MemAvailable``), so a
 benchmark never drives a shared machine into swap or the OOM killer; the row says so.
 
 ``--reynoldsflow VENV`` runs ReynoldsFlow 0.1.3 (a throwaway venv with it installed:
@@ -93,7 +93,7 @@ CONTACT_BYTES = 100
 
 def fits(n, per_point, comm):
     """``(fits, needed, available)``: whether ``n^2`` points at ``per_point`` bytes each (the
-    largest flow step measured so far, with a margin) plus the contact fit in memory."""
+    flow step of the largest grid so far, with a margin) plus the contact fit in memory."""
     needed = n * n * (1.15 * per_point + CONTACT_BYTES)
     free = comm.bcast(available() if comm.rank == 0 else None, root=0)
     return needed < free, needed, free
@@ -167,7 +167,7 @@ def main():
             del gap
         for pc in args.pcs:
             result, seconds, per_point = flow_row(problem, solution, pc, comm)
-            largest = max(largest, per_point)
+            largest = per_point
             extra = " - | - | - |"
             if rf is not None and "K" in rf:
                 extra = (f" {rf['K'] / result.transmissivity:.6f} | {rf['seconds']:.2f} | "
