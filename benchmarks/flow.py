@@ -12,6 +12,11 @@ KSP solve (set-up included), the peak memory the flow step adds in bytes per poi
 (the high-water mark of the resident set, reset before the step), the flow factor, and
 the contact solve's seconds beside them.
 
+A size whose flow step would not fit is not run: before each size the memory it needs
+is projected from the flow step of the largest grid measured so far (bytes per point,
+which fall towards a constant as the grid grows, plus the contact's) and compared with the machine's available memory (``MemAvailable``), so a
+benchmark never drives a shared machine into swap or the OOM killer; the row says so.
+
 ``--reynoldsflow VENV`` runs ReynoldsFlow 0.1.3 (a throwaway venv with it installed:
 ``python3 -m venv /tmp/rf && /tmp/rf/bin/pip install ReynoldsFlow==0.1.3``) on the same
 gap field (saved by rank 0), periodic along axis 0 with a unit gradient, and prints its
@@ -21,7 +26,7 @@ they are warmed up on a small field first and not counted.
 
 Usage::
 
-    mpirun -n 2 python benchmarks/flow.py --sizes 512 1024 2048 [--large] [--pcs hypre gamg]
+    mpirun -n 2 python benchmarks/flow.py --sizes 512 1024 2048 4096 8192 [--pcs hypre gamg]
         [--reynoldsflow /tmp/rf]
 """
 import argparse
@@ -72,6 +77,28 @@ def memory(key):
     return 0
 
 
+def available():
+    """The machine's available memory in bytes (/proc/meminfo's MemAvailable)."""
+    with open("/proc/meminfo") as f:
+        for line in f:
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+#: Bytes per point the contact solve and its fields hold beside the flow step (the
+#: topography, gap and pressure, FFT buffers, at the contact solve's peak).
+CONTACT_BYTES = 100
+
+
+def fits(n, per_point, comm):
+    """``(fits, needed, available)``: whether ``n^2`` points at ``per_point`` bytes each (the
+    flow step of the largest grid so far, with a margin) plus the contact fit in memory."""
+    needed = n * n * (1.15 * per_point + CONTACT_BYTES)
+    free = comm.bcast(available() if comm.rank == 0 else None, root=0)
+    return needed < free, needed, free
+
+
 def reset_peak():
     with open("/proc/self/clear_refs", "w") as f:
         f.write("5")
@@ -117,7 +144,14 @@ def main():
         "flow B/pt | flow factor | c | ReynoldsFlow K / petgap K | ReynoldsFlow / s | "
         "ReynoldsFlow B/pt |")
     say("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    largest = 0.0
     for n in sizes:
+        ok, needed, free = fits(n, largest, comm)
+        if not ok:
+            say(f"| {n}^2 | not run: needs about {needed / 2**30:.1f} GiB "
+                f"({largest:.0f} B/pt for the flow step, {CONTACT_BYTES} for the contact), "
+                f"{free / 2**30:.1f} GiB available |", flush=True)
+            continue
         grid = petgap.Grid((n, n), comm=comm)
         h = petgap.self_affine(grid, 0.8, 32.0, lambda_max=n / 2, rms_slope=0.1, seed=7)
         problem = petgap.ContactProblem(grid, h, petgap.ElasticHalfSpace(grid))
@@ -133,6 +167,7 @@ def main():
             del gap
         for pc in args.pcs:
             result, seconds, per_point = flow_row(problem, solution, pc, comm)
+            largest = per_point
             extra = " - | - | - |"
             if rf is not None and "K" in rf:
                 extra = (f" {rf['K'] / result.transmissivity:.6f} | {rf['seconds']:.2f} | "

@@ -41,7 +41,7 @@ class Components:
 
     Attributes
     ----------
-    labels : ndarray of int64, shape ``grid.local_shape``
+    labels : ndarray of int32 (int64 beyond 2^31 - 1 labels), shape ``grid.local_shape``
         This rank's slab: the component of each pixel, ``-1`` outside the set.
         Components are numbered ``0 .. count - 1`` by their first pixel.
     count : int
@@ -94,23 +94,22 @@ def label_components(grid, mask, *, periodic=True, winding=False):
     nx, ny = global_shape(grid)
     start, stop = local_rows(grid)
 
-    local, nlocal = ndimage.label(mask)
+    labels, nlocal = ndimage.label(mask)        # int32, numbered after the ranks before
     offset = comm.exscan(nlocal, op=MPI.SUM) if comm.size > 1 else 0
     offset = int(offset or 0)
     total = int(comm.allreduce(nlocal, op=MPI.SUM))
-    labels = np.where(local > 0, local + offset, 0).astype(np.int64)
+    if total >= np.iinfo(np.int32).max:
+        labels = labels.astype(np.int64)
+    labels[labels > 0] += offset
     pairs = _touching_pairs(grid, labels, periodic)
-
     # each local label's first global pixel, to number the components independently of ranks
-    first = np.empty(nlocal, dtype=np.int64)
-    if nlocal:
-        index = (np.arange(start, stop, dtype=np.int64)[:, None] * ny
-                 + np.arange(ny, dtype=np.int64)[None, :])
-        first[:] = ndimage.minimum(index, local, np.arange(1, nlocal + 1))
+    first = _first_pixels(labels, offset, nlocal, start * ny)
     gathered = comm.gather((pairs, first), root=0)
     verdict = _join(gathered, total, winding) if comm.rank == 0 else None
     mapping, first_pixel, wraps = comm.bcast(verdict, root=0)
-    return Components(labels=mapping[labels], count=len(first_pixel),
+    mapping = mapping.astype(labels.dtype)
+    np.take(mapping, labels, out=labels)
+    return Components(labels=labels, count=len(first_pixel),
                       first_pixel=np.asarray(first_pixel, dtype=np.int64), wraps=wraps)
 
 
@@ -121,8 +120,7 @@ def _touching_pairs(grid, labels, periodic):
     start, stop = local_rows(grid)
     pairs = []
     want_below = stop < nx or periodic
-    below = fetch_rows(grid, [labels.astype(np.float64)],
-                       [stop] if (want_below and stop > start) else [])
+    below = fetch_rows(grid, [labels], [stop] if (want_below and stop > start) else [])
     if below.shape[1]:
         mine, theirs = labels[-1], below[0, 0].astype(np.int64)
         touch = (mine > 0) & (theirs > 0)
@@ -137,6 +135,25 @@ def _touching_pairs(grid, labels, periodic):
     if not pairs:
         return np.empty((0, 4), dtype=np.int64)
     return np.unique(np.concatenate(pairs).astype(np.int64), axis=0)
+
+
+def _first_pixels(labels, offset, count, base):
+    """The smallest global pixel index of each of this rank's labels ``offset + 1 ..
+    offset + count``, found a block of rows at a time (no slab-sized index array)."""
+    # deferred: importing SciPy changes warning filters, which `import petgap` must not do
+    from scipy import ndimage
+
+    nloc, ny = labels.shape
+    first = np.full(count, -1, dtype=np.int64)
+    step = max(1, (1 << 16) // max(ny, 1))
+    for a in range(0, nloc, step):
+        block = labels[a:a + step]
+        ids = np.unique(block[block > 0]) - offset
+        ids = ids[first[ids - 1] < 0]           # rows in order: a label's first block holds it
+        if ids.size:
+            index = base + a * ny + np.arange(block.size, dtype=np.int64).reshape(block.shape)
+            first[ids - 1] = ndimage.minimum(index, block, ids + offset)
+    return first
 
 
 def _join(gathered, total, winding):

@@ -222,6 +222,11 @@ BYTES_PER_POINT_SURFACE = 40
 #: points.
 BYTES_PER_POINT_FREE = 110
 BYTES_PER_POINT_FREE_ADHESIVE = 4 * BYTES_PER_POINT_SOLVE + BYTES_PER_POINT_FREE
+#: The same for a run with a ``[flow]`` step: the flow step adds 340-360 bytes per point
+#: from 1024^2 on (docs/benchmarks.md, "Flow through the gaps"; more on smaller grids,
+#: whose multigrid has fixed costs) beside the contact's fields, and its peak, not the
+#: contact solve's, is the run's.
+BYTES_PER_POINT_FLOW = 450
 #: The most points of a rank's (padded) slab: the kernels index it with 32-bit integers.
 MAX_SLAB_POINTS = 2**31 - 1
 
@@ -265,7 +270,8 @@ def check_size(scene, comm, solve=True):
     scene's solver to the pressure solver (:meth:`~petgap.io.scene.Scene.case`),
     :data:`BYTES_PER_POINT_SOLVE` for other solves, on a free boundary
     :data:`BYTES_PER_POINT_FREE` or :data:`BYTES_PER_POINT_FREE_ADHESIVE`, or
-    :data:`BYTES_PER_POINT_SURFACE` per point of its slab) exceeds what it
+    :data:`BYTES_PER_POINT_SURFACE` per point of its slab; at least
+    :data:`BYTES_PER_POINT_FLOW` with a ``[flow]`` step) exceeds what it
     has: its share of the node's MemAvailable or what its address-space
     limit (``ulimit -v``) leaves.  The message gives the estimate, both
     limits and what to do.  Every rank looks at its own node and limits; the
@@ -289,6 +295,8 @@ def check_size(scene, comm, solve=True):
     if solve and not scene.surface.periodic:
         per_point = (BYTES_PER_POINT_FREE if scene.interaction.kind == "hard-wall"
                      else BYTES_PER_POINT_FREE_ADHESIVE)
+    if solve and scene.flow.kind != "none":
+        per_point = max(per_point, BYTES_PER_POINT_FLOW)
     need = rows * ny * per_point
     node = comm.Split_type(MPI.COMM_TYPE_SHARED)
     on_node = node.size

@@ -33,10 +33,12 @@ FLOW_COLUMNS = list(FLOW_ATTRIBUTES)
 @dataclass
 class FlowMaps:
     """Block-averaged flow maps of one step (root rank): pressure (mean over the pixels that
-    carry fluid; NaN in a block with none) and flux magnitude."""
+    carry fluid; NaN in a block with none) and flux magnitude, and the result file's
+    ``(length, pressure)`` units ("1": the scene's own)."""
     pressure: object
     flux: object
     title: str
+    units: tuple = ("1", "1")
 
 
 def analyse_flow(group, attrs, grid, max_pixels, title):
@@ -63,10 +65,21 @@ def analyse_flow(group, attrs, grid, max_pixels, title):
 def draw_flow_maps(maps, path):
     """The pressure map and the flux magnitude map of one step side by side."""
     plt = pyplot()
+    finish_maps(plt, flow_figure(plt, maps), maps.title, path)
+
+
+def flow_figure(plt, maps):
+    """The figure of :func:`draw_flow_maps`: axes in the length unit, the pressure's colour
+    bar in the pressure unit, the flux's in length^2 per time (a volume per time per unit
+    width; the time is the viscosity's unit over the pressure's, as in the result file)."""
+    length, pressure = maps.units
     fig, axes = plt.subplots(1, 2, figsize=(10.4, 4.6))
-    draw_map(fig, axes[0], maps.pressure, "fluid pressure $p$ (blank: no flow)", "coolwarm")
-    draw_map(fig, axes[1], maps.flux, "flux magnitude $|q|$", "Blues")
-    finish_maps(plt, fig, maps.title, path)
+    draw_map(fig, axes[0], maps.pressure, "fluid pressure $p$ (blank: no flow)", "coolwarm",
+             length=length, bar_unit=pressure)
+    flux = "1" if length in (None, "", "1") else f"{length}$^{{2}}$ / time"
+    draw_map(fig, axes[1], maps.flux, "flux per unit width $|q|$", "Blues", length=length,
+             bar_unit=flux)
+    return fig
 
 
 def percolation_threshold(rows):

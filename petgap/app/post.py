@@ -479,6 +479,8 @@ def analyse_step(result, index, args, grids, comm, log, surface=None):
     title = f"{result.path}, {name}: {kind}" + (
         f", {row['control']} = {row['control_value']:.4g}" if row["control"] else "")
     row.update(units_of(attrs))
+    if flow_maps is not None:
+        flow_maps.units = (row["length_unit"], row["pressure_unit"])
     step_maps = overview.StepMaps(maps, c, title, (row["length_unit"], row["pressure_unit"])) \
         if comm.rank == 0 else None
     return StepResult(row=row, distribution=dist, x=x, y=y, adhesive=adhesive, meta=meta,

@@ -33,7 +33,7 @@ from mpi4py import MPI
 from petgap.analysis._slabs import check_fields, fetch_rows, global_shape, local_rows, pixel, \
     positive
 from petgap.analysis.percolation import Percolation, check_direction, open_clusters
-from petgap.flow.reynolds import Faces, KrylovSolve, assemble, face_fluxes
+from petgap.flow.reynolds import Faces, KrylovSolve, Unknowns, assemble, face_fluxes
 from petgap.solvers.dispatch import petsc_options
 
 #: The largest relative spread of the flux through the cross-sections (the mass balance)
@@ -131,20 +131,28 @@ def leakage(grid, gap, *, viscosity=1.0, pressure_drop=1.0, direction="x", perio
         return _no_leak(grid, geometry)
     labels = percolation.components.labels
     keep = np.isin(labels, np.nonzero(percolation.spanning)[0])
-    cubes = np.where(keep, gap, 0.0) ** 3
+    cubes = np.where(keep, gap, 0.0)
+    cubes **= 3
     scale = comm.allreduce(float(cubes.max(initial=0.0)), op=MPI.MAX)
-    faces = Faces(grid, cubes / scale, axis, periodic)
-    pinned = percolation.components.first_pixel[percolation.spanning] if periodic else []
-    matrix, rhs = assemble(grid, faces, axis, periodic, pinned)
+    cubes /= scale
+    faces = Faces(grid, cubes, axis, periodic)
+    del cubes
+    active = keep.copy()
+    if periodic:      # each wrapping cluster's constant is fixed at its first pixel
+        _unpin(grid, active, percolation.components.first_pixel[percolation.spanning])
+    unknowns = Unknowns(grid, active, periodic)
+    del active
+    matrix, rhs = assemble(grid, faces, unknowns, axis, periodic)
     with petsc_options(options):
-        solver = KrylovSolve(grid, matrix, rhs, monitor)
+        solver = KrylovSolve(grid, matrix, rhs, unknowns, monitor)
+    del rhs
     try:
         u, down, across, inlet, sections, spread = _balanced(grid, solver, faces, axis,
                                                              periodic)
         status = solver.status()
     finally:
         solver.destroy()
-        matrix.destroy()
+        del solver, unknowns
     # physical flux per unit scaled flux: dp g^3 / (12 mu), g^3 in units of `scale`
     unit = pressure_drop * scale / (12.0 * viscosity)
     leak = unit * float(np.mean(sections))
@@ -201,6 +209,14 @@ def _balanced(grid, solver, faces, axis, periodic):
         if spread <= CONSERVATION or not solver.converged or solver.rtol <= RTOL_FLOOR:
             return u, down, across, inlet, sections, spread
         rtol = max(solver.rtol * 0.1 * CONSERVATION / spread, RTOL_FLOOR)
+
+
+def _unpin(grid, active, pinned):
+    """Take the pixels ``pinned`` (global indices, the same on every rank) out of ``active``."""
+    ny = global_shape(grid)[1]
+    start, stop = local_rows(grid)
+    mine = pinned[(pinned >= start * ny) & (pinned < stop * ny)] - start * ny
+    active.reshape(-1)[mine] = False
 
 
 def _flow_factor(transmissivity, mean_gap):

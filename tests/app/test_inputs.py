@@ -15,9 +15,9 @@ import pytest
 
 from conftest import clean_env, wait_for_root
 from conftest import write_shared as write
-from petgap.app.build import (BYTES_PER_POINT_FREE, BYTES_PER_POINT_PRESSURE,
-                              BYTES_PER_POINT_PRESSURE_SINGLE, BYTES_PER_POINT_SOLVE, check_options,
-                              check_size)
+from petgap.app.build import (BYTES_PER_POINT_FLOW, BYTES_PER_POINT_FREE,
+                              BYTES_PER_POINT_PRESSURE, BYTES_PER_POINT_PRESSURE_SINGLE,
+                              BYTES_PER_POINT_SOLVE, check_options, check_size)
 from petgap.io.scene import Scene, SceneError
 from petgap.solvers.options import check_petsc_options
 
@@ -145,6 +145,9 @@ def test_memory_estimate_refuses_what_cannot_fit(comm):
     assert "[surface]\n" in text
     free = Scene.from_text(text.replace("[surface]\n", "[surface]\nperiodic = false\n"), comm)
     assert check_size(free, comm) == 32 * 32 // comm.size * BYTES_PER_POINT_FREE
+    # a flow step: its multigrid, not the contact solve, sets the peak
+    flow = Scene.from_text(text + '\n[flow]\nkind = "reynolds"\n', comm)
+    assert check_size(flow, comm) == 32 * 32 // comm.size * BYTES_PER_POINT_FLOW
 
 
 def test_memory_refusal_under_an_address_space_limit(comm, mpi_tmp_path):

@@ -99,3 +99,25 @@ def test_flow_refused_where_every_step_is_adhesive(comm):
                                                       'kind = "reynolds"\ndirection = "y"')
     with pytest.raises(SceneError, match="1 pixel along y"):
         Scene.from_text(grid, comm)
+
+
+@pytest.mark.parametrize("units, x, bars", [
+    (("nm", "GPa"), "$x$ (nm)", ["fluid pressure $p$ (GPa)",
+                                 "flux per unit width $|q|$ (nm$^{2}$ / time)"]),
+    (("1", "1"), "$x$ (scene units)", ["fluid pressure $p$ (scene units)",
+                                       "flux per unit width $|q|$ (scene units)"]),
+])
+def test_flow_maps_carry_their_units(units, x, bars):
+    from petgap.analysis.maps import Map
+    from petgap.app.figures import pyplot
+    from petgap.app.flow_post import FlowMaps, flow_figure
+    values = np.linspace(0.0, 1.0, 12).reshape(4, 3)
+    m = Map(values=values, counts=np.ones((4, 3), dtype=np.int64), factor=1,
+            extent=(0.0, 40.0, 0.0, 30.0))
+    plt = pyplot()
+    fig = flow_figure(plt, FlowMaps(pressure=m, flux=m, title="t", units=units))
+    maps, colour_bars = fig.axes[:2], fig.axes[2:]
+    assert [ax.get_xlabel() for ax in maps] == [x, x]
+    assert [ax.get_ylabel() for ax in maps] == [x.replace("$x$", "$y$")] * 2
+    assert [ax.get_ylabel() for ax in colour_bars] == bars
+    plt.close(fig)
