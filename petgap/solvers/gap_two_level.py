@@ -26,7 +26,7 @@ the softening nearly cancels the springs.  So the springs must be the contact's
 own, not a lower bound.  Springs half their size leave ``W`` too negative there,
 the model takes long waves to be softer than they are, the preconditioned
 operator gets small eigenvalues, and the more so the stronger the adhesion and
-the more patches the cell holds: the iterations grew with ``w`` and with the
+the more patches the cell holds: the iterations then grow with ``w`` and with the
 grid on the sticky side.
 
 The springs and the long waves live on a coarse grid.  Let ``P`` interpolate
