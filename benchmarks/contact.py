@@ -169,6 +169,8 @@ if work > 0:
     solver.max_iter = 100000
     t = time.perf_counter(); solver.solve(mean_gap); dt = time.perf_counter() - t
     p = np.array(model.traction).reshape(n, n)
+    if len(sys.argv) > 7:   # the fields, for a caller that compares them
+        np.save(sys.argv[7], np.stack([p, np.array(model.displacement).reshape(n, n)]))
     print("TAMAAS " + json.dumps({"time": dt, "mean_pressure": float(p.mean()),
                                   "kkt_gap": float("nan"), "error": float(solver.computeError())}))
     sys.exit(0)
@@ -195,10 +197,13 @@ def tamaas_python():
     return python
 
 
-def tamaas_run(path, load, tol, work=0.0, rho=0.0, mean_gap=0.0):
+def tamaas_run(path, load, tol, work=0.0, rho=0.0, mean_gap=0.0, fields=None):
+    """Tamaas 2.9 on the surface saved at ``path``; with ``work``, adhesive at ``mean_gap``,
+    its traction and displacement saved to ``fields`` if given."""
     python = tamaas_python()
     proc = subprocess.run([str(python), "-c", TAMAAS_SCRIPT, str(path), str(load), str(tol),
-                           str(work), str(rho), str(mean_gap)],
+                           str(work), str(rho), str(mean_gap)]
+                          + ([str(fields)] if fields is not None else []),
                           capture_output=True, text=True, timeout=14400)
     text = proc.stdout + proc.stderr
     result = json.loads(text.split("TAMAAS ", 1)[1].splitlines()[0])

@@ -13,12 +13,21 @@ on it than ``K`` is.  Written out for a smooth ``phi`` and ``g = 1_F phi``::
 
 ``C`` the contact set: the patches act on long waves as springs of stiffness
 ``kappa`` per point, which grows like the inverse distance to the patch's edge
-and sums over a patch to about :data:`EDGE_SPRING` per pair of neighbouring
-pixels across its edge.  ``K^{-1}`` misses the springs, so the preconditioned
+and sums over a patch to about :data:`EDGE_SPRING` per free neighbour along
+the rows of its edge points.  ``K^{-1}`` misses the springs, so the preconditioned
 operator has eigenvalues far above 1 on long waves, more of them and larger
 the longer the cell's longest waves are against the patches' spacing: the
 iterations grow with the grid.  The adhesive curvature ``D < 0`` near the
-patches softens the same waves a little and lowers the smallest eigenvalues.
+patches softens the same waves and lowers the smallest eigenvalues.
+
+The springs and the softening sit in the same coarse cells, at the patches'
+edges, and the coarse model sees their balance: an interface is sticky where
+the softening nearly cancels the springs.  So the springs must be the contact's
+own, not a lower bound.  Springs half their size leave ``W`` too negative there,
+the model takes long waves to be softer than they are, the preconditioned
+operator gets small eigenvalues, and the more so the stronger the adhesion and
+the more patches the cell holds: the iterations then grow with ``w`` and with the
+grid on the sticky side.
 
 The springs and the long waves live on a coarse grid.  Let ``P`` interpolate
 coarse nodes every ``b`` pixels bilinearly onto the fine grid, ``R = P^T / b^2``
@@ -58,8 +67,10 @@ grid per coarse iteration (the coarse conjugate gradients run on the fields'
 ``rfft2``, where ``H`` is a multiplier), and no transform of the fine grid.
 The springs on the contact set are estimated
 from its edge along the rows (:data:`EDGE_SPRING` per free neighbour), not from
-``K 1_C`` (a transform pair whenever ``C`` changes): the iterations hardly
-change when the springs are halved or doubled, nor with ``K 1_C`` itself.
+``K 1_C`` itself (a transform pair whenever ``C`` changes): their sum over the
+patches is what the long waves feel, and the edge count gives it.  Along the
+rows only, because the rows of a slab are whole on every rank: the columns'
+neighbours across a slab's boundary would need a halo exchange.
 """
 import numpy as np
 from mpi4py import MPI
@@ -76,11 +87,13 @@ MIN_SIDE = 4
 INNER_TOLERANCE = 1e-6
 MAX_INNER = 500
 #: Spring per free neighbour along a row of a point at the wall, in ``E* / a0``: the
-#: mean of ``K 1_C`` summed over rough contacts per pair of neighbouring pixels
-#: across their edges (rows and columns).  Counted along the rows alone it gives
-#: about half of ``K 1_C``, well inside the factor 2 either way over which the
-#: iterations hardly change (module docstring).
-EDGE_SPRING = 0.66
+#: sum of ``K 1_C`` over rough contacts per free neighbour along the rows of their
+#: edge points (twice its sum per pair of neighbouring pixels across the edges in
+#: rows and columns), so that the springs sum to the contact's stiffness on long
+#: waves (module docstring).  The ratio is a property of the half-space and of
+#: how ragged the edges are; it changes little with the contact fraction or the
+#: adhesion (``docs/design.md``, the two-level preconditioner).
+EDGE_SPRING = 1.32
 #: Aliases of the hats' spectrum summed a side for the coarse compliance (their
 #: weight falls like the fourth power of the alias' order).
 ALIASES = 4

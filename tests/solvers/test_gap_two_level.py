@@ -11,7 +11,8 @@
   inner product over the half plane and the solution against a dense solve, on
   even and odd coarse sides;
 * a two-level adhesive solve reaches the state of the default solver to the
-  tolerance's reach, and the same state on 1 rank and on ``comm``.
+  tolerance's reach, and the same state on 1 rank and on ``comm``;
+* the springs on the contact set sum to the contact's stiffness ``1_C . K 1_C``.
 """
 import math
 
@@ -21,11 +22,12 @@ from mpi4py import MPI
 
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.mechanics.interactions import ExponentialAdhesion
-from petgap.mechanics.problem import ContactProblem, MeanGap
+from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers import _kernels as _k
 from petgap.solvers.gap_cg import gap_cg
-from petgap.solvers.gap_two_level import INNER_TOLERANCE, CoarseTerm, coarse_compliance
+from petgap.solvers.gap_two_level import (EDGE_SPRING, INNER_TOLERANCE, CoarseTerm,
+                                          coarse_compliance)
 from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
 
@@ -176,3 +178,28 @@ def test_the_option_reaches_the_gap_solver(comm):
     assert run.step_counts["coarse_iterations"] > 0
     errors, unknown = check_petsc_options({"petgap_two_level": "maybe"})
     assert errors and errors[0][0] == "petgap_two_level" and not unknown
+
+
+@pytest.mark.parametrize("work", [0.0, 0.05])
+def test_springs_sum_to_the_contacts_stiffness(comm, work):
+    """The springs the residual pass puts on the contact set (:data:`EDGE_SPRING` per free
+    neighbour along a row) sum to ``1_C . K 1_C``, the contact's stiffness on long waves,
+    within a fifth, on a rough hard-wall contact and an adhesive one, on ``comm``'s slabs.
+    Springs at half of it leave the coarse model softer than the interface where the
+    adhesion's softening meets them (the module docstring)."""
+    grid = Grid((256, 256), comm=comm, planner="estimate")
+    h = self_affine(grid, 0.8, 32 * grid.dx, 0.5 * grid.Lx, rms_slope=0.1, seed=7)
+    law = ExponentialAdhesion(work * E_STAR * grid.dx, 4 * grid.dx) if work else None
+    problem = ContactProblem(grid, h, ElasticHalfSpace(grid, E_STAR), law)
+    state = gap_cg(problem, Load(0.002 * E_STAR), SolverSettings(tolerance=1e-6))
+    contact = (state.gap <= 0).astype(float)
+    stiffness = problem.elastic_pressure(contact - h)          # K 1_C
+    b = 16
+    local = np.zeros((2, grid.nx // b, grid.ny // b))
+    _k.coarse_residual(state.gap, state.gap, state.gap, None, False, 1.0, 0.0, 0.0,
+                       grid.padded, EDGE_SPRING * E_STAR / grid.dx, grid.x_slice.start, b,
+                       local[0], local[1])
+    springs, exact = (comm.allreduce(float(x)) for x in
+                      (local[0].sum(), np.sum(contact * stiffness)))
+    assert 0.02 < comm.allreduce(float(contact.sum())) / grid.npoints < 0.3
+    assert 0.8 < springs / exact < 1.25
