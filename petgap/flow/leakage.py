@@ -33,7 +33,8 @@ from mpi4py import MPI
 from petgap.analysis._slabs import check_fields, fetch_rows, global_shape, local_rows, pixel, \
     positive
 from petgap.analysis.percolation import Percolation, check_direction, open_clusters
-from petgap.flow.reynolds import Faces, KrylovSolve, Unknowns, assemble, face_fluxes
+from petgap.flow.reynolds import (Faces, KrylovSolve, Unknowns, assemble, face_fluxes,
+                                  flux_pieces)
 from petgap.solvers.dispatch import petsc_options
 
 #: The largest relative spread of the flux through the cross-sections (the mass balance)
@@ -41,6 +42,9 @@ from petgap.solvers.dispatch import petsc_options
 CONSERVATION = 1e-8
 #: The tightest relative residual asked for: below it round-off decides.
 RTOL_FLOOR = 1e-15
+#: Points per piece of the balance check's fluxes (:func:`_balanced`): half a MB beside
+#: the multigrid hierarchy, where the whole flux fields would be the step's peak.
+PIECE_POINTS = 2 ** 16
 
 
 @dataclass
@@ -147,12 +151,14 @@ def leakage(grid, gap, *, viscosity=1.0, pressure_drop=1.0, direction="x", perio
         solver = KrylovSolve(grid, matrix, rhs, unknowns, monitor)
     del rhs
     try:
-        u, down, across, inlet, sections, spread = _balanced(grid, solver, faces, axis,
-                                                             periodic)
+        u, sections, spread = _balanced(grid, solver, faces, axis, periodic)
         status = solver.status()
     finally:
         solver.destroy()
         del solver, unknowns
+    # the flux fields only now, with the matrix and its hierarchy gone (the memory's peak)
+    down, across, inlet = face_fluxes(grid, faces, u, axis, periodic)
+    del faces
     # physical flux per unit scaled flux: dp g^3 / (12 mu), g^3 in units of `scale`
     unit = pressure_drop * scale / (12.0 * viscosity)
     leak = unit * float(np.mean(sections))
@@ -199,15 +205,16 @@ def _balanced(grid, solver, faces, axis, periodic):
     constrictions carry a flux far below that, the imbalance is a larger share of the
     leak.  So the sections are compared after the solve, and the solve resumed at a
     tolerance tightened by the shortfall until they agree (or round-off is reached).
+    Returns the solution slab, the sections and their spread.
     """
     rtol = None
     while True:
         u = solver.run(rtol)
-        down, across, inlet = face_fluxes(grid, faces, u, axis, periodic)
-        sections = _sections(grid, down, across, inlet, axis, periodic)
+        pieces = flux_pieces(grid, faces, u, axis, periodic, PIECE_POINTS // u.shape[1])
+        sections = _sections(grid, pieces, axis, periodic)
         spread = float(np.ptp(sections)) / max(abs(float(np.mean(sections))), 1e-300)
         if spread <= CONSERVATION or not solver.converged or solver.rtol <= RTOL_FLOOR:
-            return u, down, across, inlet, sections, spread
+            return u, sections, spread
         rtol = max(solver.rtol * 0.1 * CONSERVATION / spread, RTOL_FLOOR)
 
 
@@ -235,16 +242,21 @@ def _no_leak(grid, geometry):
                    ksp_type="", pc_type="", pressure=pressure, flux=(zero, zero.copy()))
 
 
-def _sections(grid, down, across, inlet, axis, periodic):
+def _sections(grid, pieces, axis, periodic):
     """The scaled flux through each cross-section of the map along the flow, in order
-    (free map: the inlet first, the outlet last; periodic: the seam last)."""
+    (free map: the inlet first, the outlet last; periodic: the seam last), summed over the
+    flux ``pieces`` (:func:`~petgap.flow.reynolds.flux_pieces`) of this rank's rows."""
     comm = grid.comm
-    inflow = comm.allreduce(float(np.sum(inlet)), op=MPI.SUM)
+    inflow, columns, rows = 0.0, 0.0, []
+    for _, down, across, inlet in pieces:
+        inflow += float(np.sum(inlet))
+        columns = columns + np.sum(across, axis=0)
+        rows.append(np.sum(down, axis=1))
+    inflow = comm.allreduce(inflow, op=MPI.SUM)
     if axis == 1:
-        columns = comm.allreduce(np.sum(across, axis=0), op=MPI.SUM)
+        columns = comm.allreduce(columns, op=MPI.SUM)
         return columns if periodic else np.concatenate([[inflow], columns])
-    rows = comm.allgather(np.sum(down, axis=1))
-    rows = np.concatenate(rows)
+    rows = np.concatenate(comm.allgather(np.concatenate(rows)))
     return rows if periodic else np.concatenate([[inflow], rows])
 
 

@@ -327,18 +327,32 @@ def face_fluxes(grid, faces, u, axis, periodic):
 
     ``down[i, j]`` flows from pixel ``(i, j)`` to ``(i + 1, j)`` (or into the outlet
     reservoir), ``right[i, j]`` to ``(i, j + 1)``; ``inlet[i, j]`` into the pixel from the
-    inlet reservoir (free map; zero elsewhere).
+    inlet reservoir (free map; zero elsewhere).  Collective.
+    """
+    (_, down, right, inlet), = flux_pieces(grid, faces, u, axis, periodic, rows=len(u))
+    return down, right, inlet
+
+
+def flux_pieces(grid, faces, u, axis, periodic, rows):
+    """:func:`face_fluxes` a piece of ``rows`` rows at a time: ``(first_row, down, right,
+    inlet)`` per piece, local rows.  What a sum over the fluxes needs, without the whole
+    fields beside the solver's hierarchy.  Collective (every rank iterates to the end).
     """
     nx, ny = global_shape(grid)
     stop = local_rows(grid)[1]
     halo = fetch_rows(grid, [u], [stop])[0, 0]
-    below = np.vstack([u[1:], halo[None, :]])
-    right = np.roll(u, -1, axis=1)
-    if not periodic:              # the outlet reservoir is at 0
-        below = np.where(faces.outlet, 0.0, below) if axis == 0 else below
-        right = np.where(faces.outlet, 0.0, right) if axis == 1 else right
     drive = (1.0 / (nx, ny)[axis]) if periodic else 0.0
-    down = faces.down * (u - below + (drive if axis == 0 else 0.0))
-    across = faces.right * (u - right + (drive if axis == 1 else 0.0))
-    inlet = np.where(faces.inlet, getattr(faces, faces.inlet_side) * (1.0 - u), 0.0)
-    return down, across, inlet
+    n = len(u)
+    for lo in range(0, max(n, 1), max(rows, 1)):
+        hi = min(lo + max(rows, 1), n)
+        piece = u[lo:hi]
+        below = np.vstack([u[lo + 1:hi + 1], halo[None, :]]) if hi == n else u[lo + 1:hi + 1]
+        right = np.roll(piece, -1, axis=1)
+        if not periodic:              # the outlet reservoir is at 0
+            below = np.where(faces.outlet[lo:hi], 0.0, below) if axis == 0 else below
+            right = np.where(faces.outlet[lo:hi], 0.0, right) if axis == 1 else right
+        down = faces.down[lo:hi] * (piece - below + (drive if axis == 0 else 0.0))
+        across = faces.right[lo:hi] * (piece - right + (drive if axis == 1 else 0.0))
+        inlet = np.where(faces.inlet[lo:hi],
+                         getattr(faces, faces.inlet_side)[lo:hi] * (1.0 - piece), 0.0)
+        yield lo, down, across, inlet

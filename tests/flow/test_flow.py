@@ -296,3 +296,23 @@ def test_petsc_options_reach_the_solve(comm, rough_contact):
                                                    "flow_ksp_rtol": "1e-11"})
     assert gamg.pc_type == "gamg" and hypre.pc_type == "hypre"
     assert hypre.leak_rate == pytest.approx(gamg.leak_rate, rel=1e-8)
+
+
+@pytest.mark.parametrize("periodic", [True, False])
+@pytest.mark.parametrize("direction", ["x", "y"])
+def test_flux_pieces_are_the_whole_fluxes(comm, periodic, direction):
+    """The balance check sums the fluxes a few rows at a time (beside the multigrid
+    hierarchy): the pieces, put together, are the whole fields, on any split of the rows."""
+    from petgap.flow.reynolds import Faces, face_fluxes, flux_pieces
+    grid = grid_of((13, 9))
+    rng = np.random.default_rng(5)
+    k = slab(grid, rng.uniform(0.1, 2.0, (13, 9)))
+    u = slab(grid, rng.uniform(0.0, 1.0, (13, 9)))
+    axis = 0 if direction == "x" else 1
+    faces = Faces(grid, k, axis, periodic)
+    whole = face_fluxes(grid, faces, u, axis, periodic)
+    for rows in (1, 2, 5, 100):
+        pieces = list(flux_pieces(grid, faces, u, axis, periodic, rows))
+        assert [lo for lo, *_ in pieces] == list(range(0, max(len(u), 1), rows))
+        for field, part in zip(whole, zip(*(fluxes for _, *fluxes in pieces))):
+            np.testing.assert_array_equal(np.concatenate(part), field)
