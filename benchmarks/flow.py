@@ -4,7 +4,8 @@
 Not a test: it prints a markdown table (issue 37).  On the GUIDE surface of each size
 (H = 0.8, lambda_min = 32 a0, lambda_max = L / 2, rms slope 0.1, seed 7, E* = 1) the
 contact at P0 = 0.002 E* is solved (``petgap.solve``, timed), then the flow through
-its gap along x on the periodic cell (``petgap.leakage_of``) with each preconditioner
+its gap along x on the periodic cell (``petgap.flow.leakage``, with only the gap and
+the grid kept from the contact) with each preconditioner
 asked for (``--pcs``: hypre's BoomerAMG, PETSc's GAMG).  A row reads the Krylov
 iterations (CG, the relative unpreconditioned residual 1e-10 and the mass balance of
 1e-8), the seconds of the flow step (percolation, assembly, solve, fluxes) and of its
@@ -14,8 +15,10 @@ the contact solve's seconds beside them.
 
 A size whose flow step would not fit is not run: before each size the memory it needs
 is projected from the flow step of the largest grid measured so far (bytes per point,
-which fall towards a constant as the grid grows, plus the contact's) and compared with the machine's available memory (``MemAvailable``), so a
-benchmark never drives a shared machine into swap or the OOM killer; the row says so.
+which fall towards a constant as the grid grows, plus the gap and the grid's transform
+buffers held beside it, and the contact solve's own peak before it) and compared with the
+machine's available memory (``MemAvailable``), so a benchmark never drives a shared
+machine into swap or the OOM killer; the row says so.
 
 ``--reynoldsflow VENV`` runs ReynoldsFlow 0.1.3 (a throwaway venv with it installed:
 ``python3 -m venv /tmp/rf && /tmp/rf/bin/pip install ReynoldsFlow==0.1.3``) on the same
@@ -41,6 +44,7 @@ import numpy as np
 from mpi4py import MPI
 
 import petgap
+from petgap.flow import leakage
 
 RF_SCRIPT = r"""
 import json, sys, time
@@ -86,15 +90,17 @@ def available():
     return 0
 
 
-#: Bytes per point the contact solve and its fields hold beside the flow step (the
-#: topography, gap and pressure, FFT buffers, at the contact solve's peak).
+#: Bytes per point of the contact solve at its peak, before the flow step.
 CONTACT_BYTES = 100
+#: Bytes per point held beside the flow step: the gap and the grid's transform buffers.
+HELD_BYTES = 24
 
 
 def fits(n, per_point, comm):
-    """``(fits, needed, available)``: whether ``n^2`` points at ``per_point`` bytes each (the
-    flow step of the largest grid so far, with a margin) plus the contact fit in memory."""
-    needed = n * n * (1.15 * per_point + CONTACT_BYTES)
+    """``(fits, needed, available)``: whether ``n^2`` points fit in memory, at the contact
+    solve's peak and at the flow step's (``per_point`` bytes each, the largest grid's so
+    far, beside what it holds)."""
+    needed = n * n * max(CONTACT_BYTES, per_point + HELD_BYTES)
     free = comm.bcast(available() if comm.rank == 0 else None, root=0)
     return needed < free, needed, free
 
@@ -104,16 +110,16 @@ def reset_peak():
         f.write("5")
 
 
-def flow_row(problem, solution, pc, comm):
+def flow_row(grid, gap, pc, comm):
     """One flow step: iterations, seconds, added peak bytes per point (summed over ranks)."""
     comm.Barrier()
     reset_peak()
     base = memory("VmRSS:")
     started = time.perf_counter()
-    result = petgap.leakage_of(problem, solution, options={"flow_pc_type": pc})
+    result = leakage(grid, gap, options={"flow_pc_type": pc})
     seconds = comm.allreduce(time.perf_counter() - started, op=MPI.MAX)
     added = comm.allreduce(memory("VmHWM:") - base, op=MPI.SUM)
-    return result, seconds, added / problem.grid.npoints
+    return result, seconds, added / grid.npoints
 
 
 def reynoldsflow(venv, gap, workdir):
@@ -149,7 +155,7 @@ def main():
         ok, needed, free = fits(n, largest, comm)
         if not ok:
             say(f"| {n}^2 | not run: needs about {needed / 2**30:.1f} GiB "
-                f"({largest:.0f} B/pt for the flow step, {CONTACT_BYTES} for the contact), "
+                f"({largest:.0f} B/pt for the flow step, {HELD_BYTES} held beside it), "
                 f"{free / 2**30:.1f} GiB available |", flush=True)
             continue
         grid = petgap.Grid((n, n), comm=comm)
@@ -158,15 +164,17 @@ def main():
         started = time.perf_counter()
         solution = petgap.solve(problem, petgap.Load(0.002))
         contact = comm.allreduce(time.perf_counter() - started, op=MPI.MAX)
+        gap, fraction = solution.gap, solution.contact_fraction
+        del problem, solution, h
         rf = None
         if args.reynoldsflow:
-            gap = grid.gather(solution.gap)
+            whole = grid.gather(gap)
             if comm.rank == 0:
                 with tempfile.TemporaryDirectory() as workdir:
-                    rf = reynoldsflow(args.reynoldsflow, gap, workdir)
-            del gap
+                    rf = reynoldsflow(args.reynoldsflow, whole, workdir)
+            del whole
         for pc in args.pcs:
-            result, seconds, per_point = flow_row(problem, solution, pc, comm)
+            result, seconds, per_point = flow_row(grid, gap, pc, comm)
             largest = per_point
             extra = " - | - | - |"
             if rf is not None and "K" in rf:
@@ -176,9 +184,9 @@ def main():
                 extra = f" error: {rf['error'][-80:]!r} | - | - |"
             say(f"| {n}^2 | {contact:.2f} | {result.pc_type} | {result.iterations} | "
                 f"{seconds:.2f} | {result.solve_time:.2f} | {per_point:.0f} | "
-                f"{result.flow_factor:.5f} | {solution.contact_fraction:.4f} |{extra}",
+                f"{result.flow_factor:.5f} | {fraction:.4f} |{extra}",
                 flush=True)
-        del problem, solution, h, grid
+        del gap, grid
 
 
 if __name__ == "__main__":
