@@ -30,7 +30,7 @@ they are warmed up on a small field first and not counted.
 Usage::
 
     mpirun -n 2 python benchmarks/flow.py --sizes 512 1024 2048 4096 8192 [--pcs hypre gamg]
-        [--reynoldsflow /tmp/rf]
+        [--reynoldsflow /tmp/rf] [--directions x y]
 """
 import argparse
 import json
@@ -110,13 +110,13 @@ def reset_peak():
         f.write("5")
 
 
-def flow_row(grid, gap, pc, comm):
+def flow_row(grid, gap, pc, direction, comm):
     """One flow step: iterations, seconds, added peak bytes per point (summed over ranks)."""
     comm.Barrier()
     reset_peak()
     base = memory("VmRSS:")
     started = time.perf_counter()
-    result = leakage(grid, gap, options={"flow_pc_type": pc})
+    result = leakage(grid, gap, direction=direction, options={"flow_pc_type": pc})
     seconds = comm.allreduce(time.perf_counter() - started, op=MPI.MAX)
     added = comm.allreduce(memory("VmHWM:") - base, op=MPI.SUM)
     return result, seconds, added / grid.npoints
@@ -141,6 +141,8 @@ def main():
     parser.add_argument("--large", action="store_true", help="add 8192^2")
     parser.add_argument("--pcs", nargs="+", default=["hypre", "gamg"])
     parser.add_argument("--reynoldsflow", metavar="VENV")
+    parser.add_argument("--directions", nargs="+", default=["x"], choices=["x", "y"],
+                        help="flow directions (a row each; y rows read 'pc, y')")
     args = parser.parse_args()
     comm = MPI.COMM_WORLD
     sizes = args.sizes + ([8192] if args.large else [])
@@ -173,16 +175,17 @@ def main():
                 with tempfile.TemporaryDirectory() as workdir:
                     rf = reynoldsflow(args.reynoldsflow, whole, workdir)
             del whole
-        for pc in args.pcs:
-            result, seconds, per_point = flow_row(grid, gap, pc, comm)
+        for pc, direction in [(pc, d) for pc in args.pcs for d in args.directions]:
+            result, seconds, per_point = flow_row(grid, gap, pc, direction, comm)
             largest = per_point
             extra = " - | - | - |"
-            if rf is not None and "K" in rf:
+            if rf is not None and "K" in rf and direction == "x":
                 extra = (f" {rf['K'] / result.transmissivity:.6f} | {rf['seconds']:.2f} | "
                          f"{rf['bytes'] / grid.npoints:.0f} |")
-            elif rf is not None:
+            elif rf is not None and "K" not in rf:
                 extra = f" error: {rf['error'][-80:]!r} | - | - |"
-            say(f"| {n}^2 | {contact:.2f} | {result.pc_type} | {result.iterations} | "
+            label = result.pc_type + ("" if direction == "x" else f", {direction}")
+            say(f"| {n}^2 | {contact:.2f} | {label} | {result.iterations} | "
                 f"{seconds:.2f} | {result.solve_time:.2f} | {per_point:.0f} | "
                 f"{result.flow_factor:.5f} | {fraction:.4f} |{extra}",
                 flush=True)
