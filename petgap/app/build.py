@@ -222,11 +222,11 @@ BYTES_PER_POINT_SURFACE = 40
 #: points.
 BYTES_PER_POINT_FREE = 110
 BYTES_PER_POINT_FREE_ADHESIVE = 4 * BYTES_PER_POINT_SOLVE + BYTES_PER_POINT_FREE
-#: The same for a run with a ``[flow]`` step: the flow step adds 340-360 bytes per point
-#: from 1024^2 on (docs/benchmarks.md, "Flow through the gaps"; more on smaller grids,
-#: whose multigrid has fixed costs) beside the contact's fields, and its peak, not the
-#: contact solve's, is the run's.
-BYTES_PER_POINT_FLOW = 450
+#: The same for a run with a ``[flow]`` step: the flow step's own peak, about 310 bytes
+#: per point from 1024^2 on (docs/benchmarks.md, "Flow through the gaps"; more on
+#: smaller grids, whose multigrid has fixed costs), plus the contact's problem, solution
+#: and transform buffers held beside it; that peak, not the contact solve's, is the run's.
+BYTES_PER_POINT_FLOW = 400
 #: The most points of a rank's (padded) slab: the kernels index it with 32-bit integers.
 MAX_SLAB_POINTS = 2**31 - 1
 
