@@ -89,6 +89,30 @@ def _to_map(grid, cell, field):
     return out
 
 
+def map_mean(cell, map_shape, field):
+    """The mean over the map's points of a cell field (this rank's slab).  Collective.
+
+    The map is the cell's first ``nx`` rows and ``ny`` columns: summed where they lie,
+    no rows moved.
+    """
+    nx, ny = map_shape
+    rows = max(min(cell.x_slice.stop, nx) - cell.x_slice.start, 0)
+    local = float(field[:rows, :ny].sum(dtype=np.float64))
+    return cell.comm.allreduce(local) / (nx * ny)
+
+
+def first_cell_target(problem, on_cell, target):
+    """The cell's mean gap to start from for the map's mean gap ``target``.  Collective.
+
+    The outside points' gaps taken as if ``u`` were the same outside as inside: the
+    cell's surface outside lies at its lowest height, the map's at its mean.
+    """
+    h_out = on_cell.grid.comm.allreduce(float(np.min(on_cell.topography, initial=np.inf)),
+                                        op=MPI.MIN)
+    fraction = problem.grid.npoints / on_cell.grid.npoints
+    return target + (1 - fraction) * (problem.mean_height - h_out)
+
+
 #: The mean-gap secant's inner solves (:func:`~petgap.solvers.convergence.secant_tolerance`):
 #: each to a tenth of the mean-gap error left, the first to 1e-4.
 SECANT_FORCING, SECANT_LOOSEST = 0.1, 1e-4
@@ -132,10 +156,7 @@ class MapMeanGap:
 
     def map_mean(self, g):
         """The mean of the cell's gap ``g`` (this rank's slab) over the map's points."""
-        nx, ny = self.map_shape
-        rows = max(min(self.cell.x_slice.stop, nx) - self.cell.x_slice.start, 0)
-        local = float(g[:rows, :ny].sum(dtype=np.float64))
-        return self.cell.comm.allreduce(local) / (nx * ny)
+        return map_mean(self.cell, self.map_shape, g)
 
     def __call__(self, g, residual):
         """The cell's new mean-gap target, or None to hold it (gap_cg's ``retarget``)."""
@@ -282,17 +303,14 @@ class PaddedCell:
         mean-gap error over its measured slope.  Returns the cell's solution (its
         ``map_rule`` the rule, for the next warm start) and the moves of the target.
         """
-        grid, cell = problem.grid, on_cell.grid
+        grid = problem.grid
         target = control.mean_gap
         rule = getattr(warm, "map_rule", None)
         if warm is not None and rule is not None:
             guess = rule.cell_target + (target - rule.map_mean(warm.gap)) / rule.slope
             slope, initial_gap = rule.slope, warm.gap
         else:
-            h_out = grid.comm.allreduce(float(np.min(on_cell.topography, initial=np.inf)),
-                                        op=MPI.MIN)
-            fraction = grid.npoints / cell.npoints
-            guess = target + (1 - fraction) * (problem.mean_height - h_out)
+            guess = first_cell_target(problem, on_cell, target)
             slope, initial_gap = 1.0, None if warm is None else warm.gap
         solution, rule = map_mean_gap(on_cell, grid.shape, target, guess, settings, slope=slope,
                                       initial_gap=initial_gap, monitor=monitor, log=True)
@@ -306,15 +324,13 @@ class PaddedCell:
         first as if ``u`` were the same outside as inside (the secant steps correct it).
         The steps are inexact: a solve is taken only as far as the step it serves
         needs (:func:`~petgap.solvers.convergence.secant_tolerance`), and the answer
-        is a solve to the whole tolerance whose map mean gap meets the target.  Returns the last cell
-        solution, the solves, iterations and history summed, and the verdict.
+        is a solve to the whole tolerance whose map mean gap meets the target.  Returns
+        the last cell solution, the solves, iterations and history summed, and the
+        verdict.
         """
         grid, cell = problem.grid, on_cell.grid
-        fraction = grid.npoints / cell.npoints
-        h_out = grid.comm.allreduce(float(np.min(on_cell.topography, initial=np.inf)),
-                                    op=MPI.MIN)
         target = control.mean_gap
-        guess = target + (1 - fraction) * (problem.mean_height - h_out)
+        guess = first_cell_target(problem, on_cell, target)
         previous, solves, iterations, history = None, 0, 0, []
         converged, reason = False, "max_solves"
         inner = secant_tolerance(settings.tolerance, None, SECANT_FORCING, SECANT_LOOSEST)
@@ -325,8 +341,7 @@ class PaddedCell:
             solves += 1
             iterations += solution.iterations
             history.extend(solution.history)
-            gap = _to_map(grid, cell, solution.gap)
-            mean = grid.comm.allreduce(float(gap.sum())) / grid.npoints
+            mean = map_mean(cell, grid.shape, solution.gap)
             outer_step("the map's mean gap on its padded cell", solves, self.max_solves, timer,
                        f"mean gap off by {abs(mean - target) / problem.gap_scale:.3e} h0 "
                        f"(target {settings.tolerance:.0e}) after {solution.iterations} "
