@@ -42,9 +42,6 @@ from petgap.solvers.dispatch import petsc_options
 CONSERVATION = 1e-8
 #: The tightest relative residual asked for: below it round-off decides.
 RTOL_FLOOR = 1e-15
-#: Points per piece of the balance check's fluxes (:func:`_balanced`): half a MB beside
-#: the multigrid hierarchy, where the whole flux fields would be the step's peak.
-PIECE_POINTS = 2 ** 16
 
 
 @dataclass
@@ -210,7 +207,7 @@ def _balanced(grid, solver, faces, axis, periodic):
     rtol = None
     while True:
         u = solver.run(rtol)
-        pieces = flux_pieces(grid, faces, u, axis, periodic, PIECE_POINTS // u.shape[1])
+        pieces = flux_pieces(grid, faces, u, axis, periodic)
         sections = _sections(grid, pieces, axis, periodic)
         spread = float(np.ptp(sections)) / max(abs(float(np.mean(sections))), 1e-300)
         if spread <= CONSERVATION or not solver.converged or solver.rtol <= RTOL_FLOOR:

@@ -138,8 +138,9 @@ class Faces:
     right = property(lambda self: self.y_faces[:, 1:])
 
 
-#: Pixels of the slab assembled at a time: bounds the temporaries of the assembly (about
-#: 100 bytes per pixel of a block) whatever the grid.
+#: Pixels of the slab assembled, or whose fluxes are summed, at a time: bounds the
+#: temporaries of the assembly (about 100 bytes per pixel of a block) and of the balance
+#: check beside the multigrid hierarchy whatever the grid.
 BLOCK_PIXELS = 1 << 16
 
 
@@ -333,18 +334,20 @@ def face_fluxes(grid, faces, u, axis, periodic):
     return down, right, inlet
 
 
-def flux_pieces(grid, faces, u, axis, periodic, rows):
-    """:func:`face_fluxes` a piece of ``rows`` rows at a time: ``(first_row, down, right,
-    inlet)`` per piece, local rows.  What a sum over the fluxes needs, without the whole
-    fields beside the solver's hierarchy.  Collective (every rank iterates to the end).
+def flux_pieces(grid, faces, u, axis, periodic, rows=None):
+    """:func:`face_fluxes` a piece of ``rows`` rows at a time (by default the rows of
+    :data:`BLOCK_PIXELS` pixels): ``(first_row, down, right, inlet)`` per piece, local
+    rows.  What a sum over the fluxes needs, without the whole fields beside the
+    solver's hierarchy.  Collective (every rank iterates to the end).
     """
     nx, ny = global_shape(grid)
     stop = local_rows(grid)[1]
     halo = fetch_rows(grid, [u], [stop])[0, 0]
     drive = (1.0 / (nx, ny)[axis]) if periodic else 0.0
     n = len(u)
-    for lo in range(0, max(n, 1), max(rows, 1)):
-        hi = min(lo + max(rows, 1), n)
+    rows = max(BLOCK_PIXELS // max(ny, 1) if rows is None else rows, 1)
+    for lo in range(0, max(n, 1), rows):
+        hi = min(lo + rows, n)
         piece = u[lo:hi]
         below = np.vstack([u[lo + 1:hi + 1], halo[None, :]]) if hi == n else u[lo + 1:hi + 1]
         right = np.roll(piece, -1, axis=1)
