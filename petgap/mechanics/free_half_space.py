@@ -140,9 +140,11 @@ def _dct1(a):
 def padded_symbol(grid, contact_modulus):
     """The transform of ``C`` on the map's ``2 nx x 2 ny`` padded cell, on this rank's lines.
 
-    Returns ``(local_n1, nx + 1)`` doubles: line ``ky`` (the r2c half plane of the
-    cell's ``2 ny``, lines as :meth:`petgap.parallel.grid.Grid.zero_padded_plans`
-    splits them) at ``kx = 0 .. nx`` (even in ``kx``), unnormalised.  ``C`` is even in
+    Returns ``(len(plans.kernel_ky), nx + 1)`` doubles: for each ``ky`` of the r2c half
+    plane of the cell's ``2 ny`` the plans' kernel takes here (the lines
+    :meth:`petgap.parallel.grid.Grid.zero_padded_plans` gives this rank, then the
+    Nyquist ``ky = ny``, packed into line 0, where line 0 is here), the transform at
+    ``kx = 0 .. nx`` (even in ``kx``), unnormalised.  ``C`` is even in
     ``x`` and ``y``, so its transform is a DCT-I along ``y`` of each row of offsets
     ``0 .. ny``, then along ``x`` of offsets ``0 .. nx``; the map's rows are transposed
     by double-precision plans whatever the grid's precision, and row ``nx``, which no
@@ -151,17 +153,22 @@ def padded_symbol(grid, contact_modulus):
     nx, ny, dx, dy = grid.nx, grid.ny, grid.dx, grid.dy
     plans = grid.zero_padded_plans(planner="estimate", precision="double")
     first, count = grid.x_slice.start, grid.local_shape[0]
-    rows = plans.rows[:count * (ny + 1)].reshape(count, ny + 1)
+    rows = plans.rows[:count * ny].reshape(count, ny)   # ky = 0 .. ny - 1, ny packed into 0
     for block in row_blocks(count, ncols=ny + 1):
-        rows[block] = _dct1(influence_grid(first + block.start, first + block.stop, 0, ny + 1,
-                                           dx, dy, contact_modulus))
+        along_y = _dct1(influence_grid(first + block.start, first + block.stop, 0, ny + 1,
+                                       dx, dy, contact_modulus))
+        rows[block] = along_y[:, :ny]
+        rows[block, 0] += 1j * along_y[:, ny]
     plans.transpose()
-    lo, n1 = plans.local_1_start, plans.local_n1
+    n1 = plans.local_n1
     lines = plans.lines[:n1 * nx].reshape(n1, nx)
-    last = _dct1(influence_grid(nx, nx + 1, 0, ny + 1, dx, dy, contact_modulus)[0])[lo:lo + n1]
-    symbol = np.empty((n1, nx + 1))
+    ky = plans.kernel_ky   # this rank's lines, then the packed line's Nyquist ky = ny
+    last = _dct1(influence_grid(nx, nx + 1, 0, ny + 1, dx, dy, contact_modulus)[0])[ky]
+    symbol = np.empty((len(ky), nx + 1))
     for block in row_blocks(n1, ncols=2 * nx):
         symbol[block] = _dct1(np.concatenate([lines[block].real, last[block, None]], axis=1))
+    if len(ky) > n1:
+        symbol[n1] = _dct1(np.append(lines[0].imag, last[n1]))
     return symbol
 
 
@@ -199,11 +206,11 @@ def margin_cell(grid, margin=None):
 
 def stiffness_symbol(grid, plans, cell, contact_modulus):
     """``E* |q| / 2`` on the lines ``plans`` hold of the periodic ``cell`` with ``grid``'s
-    pixels, ``(local_n1, cx // 2 + 1)``, divided by ``cx cy``; ``q = 0`` gives 0."""
+    pixels at the plans' ``kernel_ky``, ``(len(kernel_ky), cx // 2 + 1)``, divided by
+    ``cx cy``; ``q = 0`` gives 0."""
     cx, cy = cell
-    lo, n1 = plans.local_1_start, plans.local_n1
     qx = 2 * np.pi * np.arange(cx // 2 + 1) / (cx * grid.dx)
-    qy = 2 * np.pi * np.arange(lo, lo + n1) / (cy * grid.dy)
+    qy = 2 * np.pi * plans.kernel_ky / (cy * grid.dy)
     return contact_modulus / (2.0 * cx * cy) * np.hypot(qy[:, None], qx[None, :])
 
 

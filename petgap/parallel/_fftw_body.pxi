@@ -35,6 +35,22 @@ def local_size_transposed(MPI.Comm comm, Py_ssize_t n0, Py_ssize_t n1):
     return int(alloc), int(ln0), int(l0s), int(ln1), int(l1s)
 
 
+def padded_line_count(Py_ssize_t cy):
+    """The Fourier lines of a ``cy``-long padded row in :class:`PaddedConvolutionPlans`:
+    ``cy // 2`` for an even ``cy`` (the Nyquist column packed into the ``ky = 0`` line),
+    ``cy // 2 + 1`` for an odd one (no Nyquist column)."""
+    return cy // 2 if cy % 2 == 0 else cy // 2 + 1
+
+
+def local_size_lines(MPI.Comm comm, Py_ssize_t n0, Py_ssize_t nlines):
+    """Slab sizes of ``n0`` rows of ``nlines`` complex values transposed to ``nlines`` lines
+    of ``n0`` (FFTW-MPI's default blocks): ``(alloc_local, local_n0, local_0_start,
+    local_n1, local_1_start)`` as :func:`local_size_transposed` gives them."""
+    cdef ptrdiff_t ln0 = 0, l0s = 0, ln1 = 0, l1s = 0, alloc
+    alloc = fftw_mpi_local_size_2d_transposed(n0, nlines, comm.ob_mpi, &ln0, &l0s, &ln1, &l1s)
+    return int(alloc), int(ln0), int(l0s), int(ln1), int(l1s)
+
+
 def export_wisdom(MPI.Comm comm):
     """Gather the wisdom of all ranks onto rank 0 and return it as text there."""
     fftw_mpi_gather_wisdom(comm.ob_mpi)
@@ -645,12 +661,21 @@ cdef class PaddedConvolutionPlans:
 
     1. r2c transforms along ``y`` of length ``cy`` on the map's ``nx`` rows only,
        each row zero-filled in a buffer held in cache, in the map's own slab
-       decomposition (no rows move to another);
-    2. a global transpose of these ``nx x (cy // 2 + 1)`` values;
+       decomposition (no rows move to another); for an even ``cy`` the
+       Nyquist value ``ky = cy / 2``, real like ``ky = 0``, is packed into the
+       imaginary part of ``ky = 0``, so that a row holds ``cy / 2`` complex values
+       (:func:`padded_line_count`): the transpose's shape is then the map's own
+       factors, which FFTW's in-place transpose moves faster than ``cy / 2 + 1``
+       (odd for every even ``cy``);
+    2. a global transpose of these ``nx x padded_line_count(cy)`` values;
     3. per Fourier line (``ky``), the ``cx``-point transform along ``x`` of the
        line's ``nx`` values and the zeros after them, the multiplication by the
        kernel's transform, and the inverse transform, a few lines at a time in
-       cache, keeping only the map's ``nx`` outputs;
+       cache, keeping only the map's ``nx`` outputs; the packed line ``a + i b``
+       (``a`` at ``ky = 0``, ``b`` at the Nyquist ``ky``, both real along ``x``) is
+       split after its transform by Hermitian symmetry, ``A(kx) = (Z(kx) +
+       conj Z(-kx)) / 2``, ``B(kx) = (Z(kx) - conj Z(-kx)) / 2i``, and each part
+       meets its own kernel line;
     4. the transpose back, and c2r transforms of the map's ``nx`` rows, keeping
        each row's first ``ny`` outputs.
 
@@ -674,7 +699,8 @@ cdef class PaddedConvolutionPlans:
         The cell's shape, at least the map's.
     local_n0, local_n1, local_1_start : int
         The map's rows here (FFTW-MPI's blocks of ``nx``), and the Fourier lines here
-        (of ``cy // 2 + 1``; may be 0): :func:`local_size_transposed` of ``(nx, cy)``.
+        (of ``padded_line_count(cy)``; may be 0): :func:`local_size_lines` of
+        ``(nx, padded_line_count(cy))``.
     width : int
         Row length of the caller's fields (a padded slab's ``2 (ny // 2 + 1)``, or
         ``ny``): flat indices and whole fields are in rows of ``width``, the map's
@@ -686,9 +712,10 @@ cdef class PaddedConvolutionPlans:
     planner : str
         FFTW planner effort; measuring overwrites the buffers.
 
-    The kernel's transform (:meth:`set_kernel`) is real and even in ``x``: line
-    ``j`` holds it at ``kx = 0 .. cx // 2``, divided by ``cx cy`` (the inverse
-    transform's normalisation).
+    The kernel's transform (:meth:`set_kernel`) is real and even in ``x``: row
+    ``j`` holds it at ``kx = 0 .. cx // 2`` for ``ky = kernel_ky[j]``, divided by
+    ``cx cy`` (the inverse transform's normalisation): one row per line here, and on
+    the rank holding the packed ``ky = 0`` line one more, its Nyquist ``ky``, last.
     """
     cdef fftw_plan transpose_fwd
     cdef fftw_plan transpose_bwd
@@ -701,7 +728,9 @@ cdef class PaddedConvolutionPlans:
     cdef fftw_complex *rows_data
     cdef fftw_complex *lines_data
     cdef const double *kernel_data
-    cdef Py_ssize_t nx, ny, cx, cy, nyc, ln0, width
+    cdef Py_ssize_t nx, ny, cx, cy, nyc, nyl, ln0, width
+    cdef Py_ssize_t nyquist_row   # the kernel row of the packed line's Nyquist part, or -1
+    cdef bint packed
     cdef int nrows[2]
     cdef int nlines[2]
     cdef object comm, kernel
@@ -736,7 +765,10 @@ cdef class PaddedConvolutionPlans:
         if local_n0 <= 0 or local_n1 < 0 or width < ny:
             raise ValueError("every rank needs a row of the map, and rows of at least ny values")
         self.nyc = cy // 2 + 1
-        if rows.size < local_n0 * self.nyc or lines.size < local_n1 * nx:
+        self.nyl = padded_line_count(cy)
+        self.packed = self.nyl != self.nyc
+        self.nyquist_row = local_n1 if self.packed and local_1_start == 0 and local_n1 > 0 else -1
+        if rows.size < local_n0 * self.nyl or lines.size < local_n1 * nx:
             raise ValueError("the row or line buffer is too small for this rank's part")
         self.comm, self.rows, self.lines = comm, rows, lines
         self.nx, self.ny, self.cx, self.cy = nx, ny, cx, cy
@@ -747,6 +779,7 @@ cdef class PaddedConvolutionPlans:
         cdef unsigned flags = PLANNER_FLAGS[planner]
         cdef int n_y = <int>cy, n_x = <int>cx
         cdef int row_width = <int>(2 * self.nyc), ncomplex = <int>self.nyc
+        cdef int nlines_row = <int>self.nyl
         cdef int *nrows = self.nrows
         cdef int *nlines = self.nlines
         cdef MPI_Comm mcomm = comm.ob_mpi
@@ -759,10 +792,10 @@ cdef class PaddedConvolutionPlans:
         cdef bint ok = True
         with nogil:
             self.transpose_fwd = fftw_mpi_plan_many_transpose(
-                nx, ncomplex, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
+                nx, nlines_row, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
                 <real_t *>self.rows_data, <real_t *>self.lines_data, mcomm, flags)
             self.transpose_bwd = fftw_mpi_plan_many_transpose(
-                ncomplex, nx, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
+                nlines_row, nx, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
                 <real_t *>self.lines_data, <real_t *>self.rows_data, mcomm, flags)
             for k in range(2):
                 if nrows[k] > 0:
@@ -785,18 +818,27 @@ cdef class PaddedConvolutionPlans:
             raise RuntimeError(f"FFTW-MPI could not plan the convolution of a {nx} x {ny} map "
                                f"on a {cx} x {cy} cell")
 
+    @property
+    def kernel_ky(self):
+        """The ``ky`` (in the cell's ``cy``) of each row :meth:`set_kernel` takes here: this
+        rank's lines, then the packed line's Nyquist ``cy / 2`` where that line is here."""
+        ky = np.arange(self.local_1_start, self.local_1_start + self.local_n1)
+        return np.append(ky, self.cy // 2) if self.nyquist_row >= 0 else ky
+
     def set_kernel(self, const double[:, ::1] kernel):
-        """The kernel's transform on this rank's lines, ``(local_n1, cx // 2 + 1)``, kept by
-        reference."""
-        if kernel.shape[0] != self.local_n1 or kernel.shape[1] != self.cx // 2 + 1:
+        """The kernel's transform at :attr:`kernel_ky`, ``(len(kernel_ky), cx // 2 + 1)``, kept
+        by reference."""
+        cdef Py_ssize_t nk = self.local_n1 + (1 if self.nyquist_row >= 0 else 0)
+        if kernel.shape[0] != nk or kernel.shape[1] != self.cx // 2 + 1:
             raise ValueError(f"the kernel has shape {tuple(kernel.shape)[:2]}, the lines here "
-                             f"need ({self.local_n1}, {self.cx // 2 + 1})")
+                             f"need ({nk}, {self.cx // 2 + 1})")
         self.kernel = kernel
-        self.kernel_data = &kernel[0, 0] if self.local_n1 > 0 else NULL
+        self.kernel_data = &kernel[0, 0] if nk > 0 else NULL
 
     def transpose(self):
-        """The rows buffer's ``(local_n0, cy // 2 + 1)`` values to the lines buffer, transposed
-        (what a kernel's transform can be made with).  Collective."""
+        """The rows buffer's ``(local_n0, padded_line_count(cy))`` values to the lines buffer,
+        transposed (what a kernel's transform can be made with; for an even ``cy``, put
+        each row's Nyquist value in the imaginary part of its first).  Collective."""
         self.half_made = False
         with nogil:
             fftw_execute(self.transpose_fwd)
@@ -846,9 +888,18 @@ cdef class PaddedConvolutionPlans:
             i0 += self.nrows[0]
 
     cdef inline void _rows_forward(self, Py_ssize_t i0, Py_ssize_t m, int which) noexcept nogil:
-        """The block's rows transformed along ``y`` in place, then to the rows buffer."""
+        """The block's rows transformed along ``y`` in place, then to the rows buffer (each
+        row's Nyquist value, if any, packed into its ``ky = 0`` value's imaginary part)."""
+        cdef Py_ssize_t r, nyc = self.nyc, nyl = self.nyl
+        cdef fftw_complex *c
         fftw_execute(self.rows_fwd[which])
-        memcpy(self.rows_data + i0 * self.nyc, self.block, m * self.nyc * sizeof(fftw_complex))
+        if not self.packed:
+            memcpy(self.rows_data + i0 * nyl, self.block, m * nyl * sizeof(fftw_complex))
+            return
+        for r in range(m):
+            c = <fftw_complex *>self.block + r * nyc
+            (<real_t *>c)[1] = (<real_t *>(c + nyc - 1))[0]
+            memcpy(self.rows_data + (i0 + r) * nyl, c, nyl * sizeof(fftw_complex))
 
     cdef double _lines_pass(self, bint form) noexcept nogil:
         """Stage 3 on the transposed rows in the lines buffer.
@@ -874,12 +925,21 @@ cdef class PaddedConvolutionPlans:
             if form:
                 for j in range(m):
                     g = self.local_1_start + j0 + j
-                    weight = 1.0 if g == 0 or 2 * g == self.cy else 2.0
-                    total = total + weight * self._line_form(j0 + j, <real_t *>(self.line + j * n))
+                    if g == 0 and self.packed:
+                        total = total + self._packed_line_form(<real_t *>(self.line + j * n))
+                    else:
+                        weight = 1.0 if g == 0 else 2.0
+                        total = total + weight * self._line_form(
+                            self.kernel_data + (j0 + j) * (n // 2 + 1),
+                            <real_t *>(self.line + j * n))
                 j0 += self.nlines[0]
                 continue
             for j in range(m):
-                self._multiply_line(j0 + j, <real_t *>(self.line + j * n))
+                g = self.local_1_start + j0 + j
+                if g == 0 and self.packed:
+                    self._multiply_packed_line(<real_t *>(self.line + j * n))
+                else:
+                    self._multiply_line(j0 + j, <real_t *>(self.line + j * n))
             fftw_execute(self.lines_bwd[which])
             for j in range(m):
                 memcpy(self.lines_data + (j0 + j) * nx, self.line + j * n,
@@ -887,15 +947,50 @@ cdef class PaddedConvolutionPlans:
             j0 += self.nlines[0]
         return total
 
-    cdef double _line_form(self, Py_ssize_t j, const real_t *s) noexcept nogil:
-        """``sum_kx k |s|^2`` of line ``j`` (``cx`` values at ``s``), the kernel even in ``kx``."""
-        cdef const double *kern = self.kernel_data + j * (self.cx // 2 + 1)
+    cdef double _line_form(self, const double *kern, const real_t *s) noexcept nogil:
+        """``sum_kx k |s|^2`` of a line (``cx`` values at ``s``), the kernel ``kern`` even in
+        ``kx``."""
         cdef Py_ssize_t i, n = self.cx, half = self.cx // 2
         cdef double total = _norm2(s) * kern[0]
         for i in range(1, half + 1):   # kx and -kx together (an even cx's Nyquist once)
             total = total + kern[i] * (_norm2(s + 2 * i)
                                        + (_norm2(s + 2 * (n - i)) if n - i != i else 0.0))
         return total
+
+    cdef double _packed_line_form(self, const real_t *s) noexcept nogil:
+        """``sum_kx (ka |A|^2 + kb |B|^2)`` of the packed line's transform ``Z = A + i B``
+        (``cx`` values at ``s``), ``ka`` its ``ky = 0`` kernel row, ``kb`` its Nyquist row."""
+        cdef const double *ka = self.kernel_data
+        cdef const double *kb = self.kernel_data + self.nyquist_row * (self.cx // 2 + 1)
+        cdef Py_ssize_t k, m, n = self.cx
+        cdef double ar, ai, br, bi, total = 0.0
+        for k in range(n):
+            m = (n - k) % n
+            ar = 0.5 * (<double>s[2 * k] + s[2 * m])
+            ai = 0.5 * (<double>s[2 * k + 1] - s[2 * m + 1])
+            br = 0.5 * (<double>s[2 * k + 1] + s[2 * m + 1])
+            bi = -0.5 * (<double>s[2 * k] - s[2 * m])
+            total = total + ka[min(k, m)] * (ar * ar + ai * ai) + kb[min(k, m)] * (br * br + bi * bi)
+        return total
+
+    cdef void _multiply_packed_line(self, real_t *s) noexcept nogil:
+        """The packed line's transform ``Z = A + i B`` to ``ka A + i kb B`` (whose inverse is
+        the ``ky = 0`` and Nyquist parts' products packed as before): at ``kx`` and
+        ``-kx``, ``((ka + kb) Z(kx) + (ka - kb) conj Z(-kx)) / 2``."""
+        cdef const double *ka = self.kernel_data
+        cdef const double *kb = self.kernel_data + self.nyquist_row * (self.cx // 2 + 1)
+        cdef Py_ssize_t k, m, n = self.cx
+        cdef double plus, minus, zr, zi, wr, wi
+        for k in range(n // 2 + 1):
+            m = (n - k) % n
+            plus = 0.5 * (ka[k] + kb[k])
+            minus = 0.5 * (ka[k] - kb[k])
+            zr, zi, wr, wi = s[2 * k], s[2 * k + 1], s[2 * m], s[2 * m + 1]
+            s[2 * k] = <real_t>(plus * zr + minus * wr)
+            s[2 * k + 1] = <real_t>(plus * zi - minus * wi)
+            if m != k:
+                s[2 * m] = <real_t>(plus * wr + minus * zr)
+                s[2 * m + 1] = <real_t>(plus * wi - minus * zi)
 
     cdef void _multiply_line(self, Py_ssize_t j, real_t *s) noexcept nogil:
         """Line ``j`` (``cx`` values at ``s``) times the kernel, even in ``kx``."""
@@ -918,12 +1013,22 @@ cdef class PaddedConvolutionPlans:
         to the ``ns`` points ``pidx``."""
         cdef Py_ssize_t i0 = 0, m, r, k = 0, base, end, p
         cdef Py_ssize_t ny = self.ny, w = self.width, w2 = 2 * self.nyc
+        cdef Py_ssize_t nyc = self.nyc, nyl = self.nyl
+        cdef fftw_complex *c
         cdef int which
         fftw_execute(self.transpose_bwd)
         while i0 < self.ln0:
             m = min(<Py_ssize_t>self.nrows[0], self.ln0 - i0)
             which = 0 if m == self.nrows[0] else 1
-            memcpy(self.block, self.rows_data + i0 * self.nyc, m * self.nyc * sizeof(fftw_complex))
+            if not self.packed:
+                memcpy(self.block, self.rows_data + i0 * nyl, m * nyl * sizeof(fftw_complex))
+            else:
+                for r in range(m):   # unpack the Nyquist value from the imaginary part of ky = 0
+                    c = <fftw_complex *>self.block + r * nyc
+                    memcpy(c, self.rows_data + (i0 + r) * nyl, nyl * sizeof(fftw_complex))
+                    (<real_t *>(c + nyc - 1))[0] = (<real_t *>c)[1]
+                    (<real_t *>(c + nyc - 1))[1] = 0
+                    (<real_t *>c)[1] = 0
             fftw_execute(self.rows_bwd[which])
             if gathered == NULL:
                 for r in range(m):

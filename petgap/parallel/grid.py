@@ -326,7 +326,8 @@ class Grid:
         precision = self.precision if precision is None else precision
         binding = BINDINGS[precision]
         cx, cy = (2 * self.nx, 2 * self.ny) if cell is None else cell
-        alloc, ln0, l0s, ln1, l1s = _fftw_mpi.local_size_transposed(self.comm, self.nx, cy)
+        alloc, ln0, l0s, ln1, l1s = _fftw_mpi.local_size_lines(
+            self.comm, self.nx, _fftw_mpi.padded_line_count(cy))
         if (ln0, l0s) != (self.local_shape[0], self.x_slice.start):
             raise DecompositionError(f"the padded rows of a {self.nx} x {self.ny} map are split "
                                      f"unlike the map's ({ln0} from {l0s} here)")

@@ -6,7 +6,7 @@ import pytest
 from petgap.parallel.grid import Grid
 
 SHAPES_AND_CELLS = [((12, 10), None), ((9, 7), None), ((7, 12), (11, 15)), ((16, 5), (21, 5)),
-                    ((6, 9), (6, 9))]
+                    ((6, 9), (6, 9)), ((12, 4), None)]
 TOLERANCE = {"double": 1e-13, "single": 3e-6}
 
 
@@ -29,8 +29,7 @@ def _reference(p, symbol, cell):
 def _plans(grid, cell, symbol):
     cx, cy = (2 * grid.nx, 2 * grid.ny) if cell is None else cell
     plans = grid.zero_padded_plans(cell, planner="estimate")
-    lo, n1 = plans.local_1_start, plans.local_n1
-    plans.set_kernel(np.ascontiguousarray(symbol[:cx // 2 + 1, lo:lo + n1].T) / (cx * cy))
+    plans.set_kernel(np.ascontiguousarray(symbol[:cx // 2 + 1, plans.kernel_ky].T) / (cx * cy))
     return plans
 
 
