@@ -111,6 +111,7 @@ from mpi4py import MPI
 from petgap.io import solver_registry as registry
 from petgap.mechanics.problem import Load, MeanGap
 from petgap.parallel.collective import global_sums
+from petgap.parallel.grid import row_blocks
 from petgap.parallel.log import GAP_PASS_EVENT, SET_UPDATE_EVENT, event
 from petgap.solvers import _contact_set as _cs
 from petgap.solvers.contact_limits import touching_state
@@ -137,7 +138,7 @@ REFRESH_INTERVAL = 50
 
 
 def polonsky_keer(problem, control, settings=SolverSettings(), *, initial_pressure=None,
-                  monitor=None):
+                  monitor=None, retarget=None):
     """Solve non-adhesive contact under load, mean-gap or indentation control.
 
     Parameters
@@ -155,6 +156,13 @@ def polonsky_keer(problem, control, settings=SolverSettings(), *, initial_pressu
         Warm start (e.g. the previous step of a sweep); copied.
     monitor : callable, optional
         ``monitor(iteration, residual)`` on every rank at every iteration.
+    retarget : callable, optional
+        Under indentation, ``retarget(cg, residual)`` on every iteration that would
+        carry on or stop converged: None to hold the depth, or ``(offset, scale)``, a
+        new offset of ``g = u - h + offset`` and a factor for the pressure, which
+        restarts the iteration from there (a move costs an iteration; the solve
+        converges only on an iteration the rule holds).  Collective: the rule must
+        answer alike on every rank (:class:`petgap.solvers.indentation.DepthForMeanGap`).
 
     Returns
     -------
@@ -168,6 +176,7 @@ def polonsky_keer(problem, control, settings=SolverSettings(), *, initial_pressu
     start, description = choose_start(problem, control, settings, initial_pressure, load,
                                       polonsky_keer)
     cg = PressureCG(problem, settings, monitor, load, target, offset)
+    cg.retarget = retarget
     start_time = timer()
     start_ops = problem.operator_applications
     cg.begin(start, transforms)
@@ -221,6 +230,7 @@ class PressureCG:
         self.history = []
         self.converged, self.reason, self.it = False, "max_iterations", 0
         self.best, self.best_it = np.inf, 0
+        self.retarget = None
         self._u = None
 
     @property
@@ -258,6 +268,12 @@ class PressureCG:
             if verdict == "refresh":
                 self.fresh, self.scale = True, 1.0
                 continue
+            if verdict in ("", "converged_kkt") and self.retarget is not None:
+                moved = self.retarget(self, residual)
+                if moved is not None:
+                    self.offset, self.scale = moved
+                    self.delta, self.fresh = 0.0, True
+                    continue
             if verdict:
                 self.converged, self.reason = verdict == "converged_kkt", verdict
                 return
@@ -303,6 +319,19 @@ class PressureCG:
         norms = np.array([in_max, pen_max])
         self.comm.Allreduce(MPI.IN_PLACE, norms, op=MPI.MAX)
         return n_contact, g_norm, float(norms.max()) / self.problem.gap_scale
+
+    def mean_gap(self, projected=False):
+        """The mean over the map of the iterate's gap ``u - h + offset``, or with
+        ``projected`` of its projection onto the contact state (0 on ``S``, ``>= 0`` off
+        it: what :meth:`result` stores).  Collective; a pass over ``u`` and ``h``."""
+        local, offset = 0.0, self.offset - self.shift
+        for rows in row_blocks(len(self.h), ncols=self.ny):
+            g = self.u[rows, :self.ny] - self.h[rows] + offset
+            if projected:
+                np.maximum(g, 0.0, out=g)
+                g[self.mask[rows].view(bool)] = 0.0
+            local += float(g.sum(dtype=np.float64))
+        return global_sums(self.comm, local)[0] / self.n
 
     def _objective(self):
         """The complementary energy ``(1/2) <p, K^-1 p> - <p, h - offset>`` of the iterate.

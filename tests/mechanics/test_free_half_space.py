@@ -190,9 +190,10 @@ def test_mean_gap_on_a_free_boundary_is_reached_through_the_indentation(comm):
     by_depth = petgap.solve(problem, petgap.Indentation(1.0))
     s = petgap.solve(problem, petgap.MeanGap(by_depth.mean_gap))
     assert s.converged and s.control.kind == "mean-gap"
-    assert s.mean_gap == pytest.approx(by_depth.mean_gap, rel=1e-8)
+    # the mean gap to the solve's tolerance, 1e-8 h0
+    assert s.mean_gap == pytest.approx(by_depth.mean_gap, rel=0, abs=1e-8 * problem.gap_scale)
     assert s.mean_pressure == pytest.approx(by_depth.mean_pressure, rel=1e-5)
-    assert "indentation solves to the mean gap" in s.start
+    assert "the depth moved" in s.start and s.depth == pytest.approx(1.0, rel=1e-6)
     # beyond first touch the surfaces stay apart, unloaded
     apart = petgap.solve(problem, petgap.MeanGap(10 * by_depth.mean_gap))
     assert apart.mean_pressure == 0 and apart.mean_gap == pytest.approx(10 * by_depth.mean_gap)
@@ -389,15 +390,16 @@ def test_adhesive_free_map_with_an_odd_side(comm):
     assert s.converged and s.contact_fraction > 0
 
 
-def test_free_mean_gap_costs_at_most_two_load_solves(comm):
-    """The mean gap of a rough free map by the depth's secant: its re-solves start from the
-    pressure moved along the secant, so the whole costs at most twice the iterations of the
-    load solve with that mean gap."""
-    grid = Grid((128, 128), comm=comm, planner="estimate", wisdom=False)
+def test_free_mean_gap_costs_less_than_two_load_solves(comm):
+    """The mean gap of a rough free map in one indentation solve whose depth moves as the
+    iterate's mean gap settles: fewer than twice the operator applications of the load
+    solve with that mean gap (a solve per depth, each warm from the last, took 2.0x)."""
+    grid = Grid((256, 256), comm=comm, planner="estimate", wisdom=False)
     h = petgap.self_affine(grid, 0.8, 16.0, grid.Lx / 2, rms_slope=0.1, seed=1)
     problem = petgap.ContactProblem(grid, h, FreeHalfSpace(grid))
     by_load = petgap.solve(problem, petgap.Load(0.002), tolerance=1e-8)
     s = petgap.solve(problem, petgap.MeanGap(by_load.mean_gap), tolerance=1e-8)
     assert s.converged and s.mean_gap == pytest.approx(by_load.mean_gap, rel=1e-8)
     assert s.mean_pressure == pytest.approx(by_load.mean_pressure, rel=1e-6)
-    assert s.iterations <= 2 * by_load.iterations, (s.iterations, by_load.iterations)
+    assert s.operator_applications <= 1.85 * by_load.operator_applications, \
+        (s.operator_applications, by_load.operator_applications)
