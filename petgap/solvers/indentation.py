@@ -20,8 +20,7 @@ from petgap.solvers.settings import SolverSettings
 #: The depth moves once the KKT residual is below this many times the mean-gap error
 #: over ``h0`` (the forcing term of an inexact Newton method): the iterate's mean gap is
 #: then read to about its error, and a secant step through two such reads removes most
-#: of it.  Read earlier (3x, the adhesive free map's :class:`~petgap.solvers.free_boundary.
-#: MapMeanGap`), the reads drift with the iterate and the depth moves twice as often.
+#: of it (a move restarts the iteration, so fewer, surer moves are what is wanted).
 FORCING = 1.0
 #: A move scales the pressure by at most this factor or its inverse (the iteration
 #: finds the rest): the prediction is linear in the move and fails for large ones.
