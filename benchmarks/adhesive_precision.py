@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """What single or mixed precision could save an adhesive solve, measured in double.
 
-Not a test: it prints the markdown table of docs/accuracy.md ("Precision: single and
-mixed", adhesion).  A mixed solve is a single-precision solve to its floor
+Not a test: it prints the markdown table of docs/accuracy.md ("Adhesion: double only"),
+behind the refusal of single and mixed precision for adhesion
+(``petgap.io.solver_registry.ADHESIVE_PRECISION``).  A mixed solve is a single-precision solve to its floor
 (:data:`petgap.io.solver_registry.SINGLE_TOLERANCE_FLOOR`) and a double solve from its
 state to the tolerance (:mod:`petgap.solvers.mixed_precision`).  Its best case is
 measured here without a single-precision gap solver:
