@@ -285,7 +285,6 @@ def _precision(case):
                        (("interaction", True),))
     facts = tuple(fact for fact, wrong in (
         (("boundary", False), case.periodic is False),
-        (("boundary", False), case.periodic is False),
         (("solver", case.solver), case.solver is not None
          and precision not in SOLVERS[case.solver].precisions),
         (("control", case.control), case.control not in (None, "load", "mean-gap")))
