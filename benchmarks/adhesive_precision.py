@@ -3,10 +3,10 @@
 
 Not a test: it prints the markdown table of docs/accuracy.md ("Adhesion: double only"),
 behind the refusal of single and mixed precision for adhesion
-(``petgap.io.solver_registry.ADHESIVE_PRECISION``).  A mixed solve is a single-precision solve to its floor
-(:data:`petgap.io.solver_registry.SINGLE_TOLERANCE_FLOOR`) and a double solve from its
-state to the tolerance (:mod:`petgap.solvers.mixed_precision`).  Its best case is
-measured here without a single-precision gap solver:
+(``petgap.io.solver_registry.ADHESIVE_PRECISION``).  A mixed solve is a single-precision
+solve to its floor (:data:`petgap.io.solver_registry.SINGLE_TOLERANCE_FLOOR`) and a double
+solve from its state to the tolerance (:mod:`petgap.solvers.mixed_precision`).  Its best
+case is measured here without a single-precision gap solver:
 
 * **double**: the adhesive solve to 1e-8 from the cold start (``petgap.solve``);
 * **K rounding**: what 32 bits do to the gap solver's elastic pressure
