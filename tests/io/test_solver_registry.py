@@ -108,3 +108,18 @@ def test_a_control_object_in_the_registrys_words_and_the_check_that_raises():
     with pytest.raises(ValueError, match=r"load -0.5 is tensile.*allowed: a load >= 0"):
         registry.check(Case(solver="pcg", adhesive=False, periodic=True,
                             **registry.control_words(Load(-0.5))))
+
+
+@pytest.mark.parametrize("precision", ["single", "mixed"])
+def test_adhesive_scene_in_single_or_mixed_is_refused_with_the_reason(comm, precision):
+    """A scene with an interaction and ``solver.precision`` other than double is refused
+    naming the key, the reason (adhesion in double only, docs/accuracy.md) and what is
+    allowed; the same scene in double is accepted."""
+    with pytest.raises(SceneError) as info:
+        Scene.from_text(SCENE + ADHESIVE + f'[solver]\nprecision = "{precision}"\n', comm)
+    message = str(info.value)
+    assert f'solver.precision = "{precision}"' in message, message
+    assert "adhesion is solved in double only" in message and "docs/accuracy.md" in message
+    assert "allowed: double" in message, message
+    scene = Scene.from_text(SCENE + ADHESIVE + '[solver]\nprecision = "double"\n', comm)
+    assert scene.solver.precision == "double" and scene.interaction.kind == "exponential"

@@ -138,3 +138,18 @@ def test_refusals_name_what_is_not_solved(comm):
     # no tolerance given: the floor, reached
     at_floor = solve(single, Load(0.004))
     assert at_floor.converged and at_floor.kkt_gap <= SINGLE_TOLERANCE_FLOOR
+
+
+def test_adhesion_refuses_single_and_mixed_with_the_reason(comm):
+    """Adhesion is solved in double only, and the refusal says why and where it is measured
+    (docs/accuracy.md), on every rank, for both precisions and both controls."""
+    sticky = rough(comm, shape=(64, 64)).with_interaction(ExponentialAdhesion(0.01, 1.0))
+    single = rough(comm, "single", shape=(64, 64)).with_interaction(
+        ExponentialAdhesion(0.01, 1.0))
+    reason = (r"is for non-adhesive contact: adhesion is solved in double only\..*K \(g \+ h\)"
+              r".*docs/accuracy\.md.*\(here: an adhesive interaction\); allowed: double")
+    for control in (Load(0.004), MeanGap(0.5)):
+        with pytest.raises(ValueError, match=r"precision 'mixed' " + reason):
+            solve(sticky, control, precision="mixed")
+        with pytest.raises(ValueError, match=r"precision 'single' " + reason):
+            solve(single, control)
