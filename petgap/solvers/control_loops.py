@@ -91,6 +91,14 @@ def _apart(problem, control, kind, timer):
 def _multiplier_secant(problem, target, kind, settings, initial, monitor, max_outer):
     """The secant on ``log(P0 / h0' E*)`` of :func:`solve_mean_gap_by_multiplier`.
 
+    An adhesive state may hold its mean gap under tension (``P0 < 0``), which no
+    logarithm reaches: there the variable is ``asinh(P0 / c)``, ``c = 0.01 h0' E*``
+    the starting load, which is ``log(2 P0 / c)`` well above ``c`` and linear through
+    zero.  Its steps are at most 1 (5 for the logarithm): a tensile load beyond the
+    pull-off has no state, and a longer step into tension finds none.  The inner
+    tolerance sees the variable's ``dP0 / dv = sqrt(P0^2 + c^2)`` where the
+    logarithm's is ``P0``.
+
     Returns the last inner solution, the iterations summed, the history of
     ``(P0, mean gap)`` and whether the iteration limit ended it.
     """
@@ -99,8 +107,13 @@ def _multiplier_secant(problem, target, kind, settings, initial, monitor, max_ou
     iterations = 0
     history = []
     # Starting guess: the previous multiplier, or a typical rough-contact pressure.
-    pressure = initial.mean_pressure if initial is not None and initial.mean_pressure > 0 \
-        else 0.01 * ps
+    adhesive = problem.interaction.adhesive
+    pressure = initial.mean_pressure if initial is not None and \
+        (initial.mean_pressure > 0 or adhesive) else 0.01 * ps
+    scale = 0.01 * ps
+    to_variable = (lambda p: math.asinh(p / scale)) if adhesive else (lambda p: math.log(p / ps))
+    from_variable = (lambda v: scale * math.sinh(v)) if adhesive else (lambda v: ps * math.exp(v))
+    reach = 1.0 if adhesive else 5.0
     # The secant works on log(P0 / (h0' E*)), not log(P0): the same numbers, to the
     # last bit, in unit systems that differ by powers of two.  Its slope
     # d g_bar / d log P0 ~ -gamma h0 with gamma ~ 0.5 for rough contact, until measured.
@@ -126,14 +139,14 @@ def _multiplier_secant(problem, target, kind, settings, initial, monitor, max_ou
             break
         if len(history) >= 3 and history[-1][1] == history[-2][1] == history[-3][1]:
             break  # the inner solves no longer move the mean gap: reported as not converged
-        points.append((math.log(pressure / ps), solution.mean_gap))
+        points.append((to_variable(pressure), solution.mean_gap))
         if len(points) > 1:
             (l1, g1), (l2, g2) = points[-2], points[-1]
             measured = (g2 - g1) / (l2 - l1) if l2 != l1 else slope
             slope = measured if measured < 0 else -0.5 * h0
-        log_p = points[-1][0] + (target - points[-1][1]) / slope
-        load = math.exp(min(max(log_p, points[-1][0] - 5.0), points[-1][0] + 5.0))
-        pressure = load * ps
+        step = min(max((target - points[-1][1]) / slope, -reach), reach)
+        pressure = from_variable(points[-1][0] + step)
+        load = pressure / ps if not adhesive else math.hypot(pressure, scale) / ps
         inner = _inner_tolerance(tolerance, error, load, slope / h0)
     return solution, iterations, history, False
 

@@ -976,3 +976,17 @@ def test_a_tao_builtin_that_stops_improving_says_so(comm, monkeypatch):
     assert solution.iterations < 100000
     # the last 20 checks never beat nine tenths of the best before them
     assert min(residuals[-20:]) > 0.9 * min(residuals[:-20])
+
+
+def test_a_tao_builtin_holds_an_adhesive_mean_gap_under_tension(comm):
+    """An adhesive mean gap whose state pulls (mean pressure < 0) is reached by a TAO
+    built-in's multiplier loop: the same state as the load solve that made the target,
+    on one rank as on two.  A secant on log(P0) alone has no tensile load to step to."""
+    grid = Grid((64, 64), comm=comm, planner="estimate", wisdom=False)
+    h = self_affine(grid, 0.8, 8.0, 32.0, rms_slope=0.1, seed=7)
+    problem = ContactProblem(grid, h, ElasticHalfSpace(grid), ExponentialAdhesion(0.05, 2.0))
+    pulled = solve(problem, Load(-0.005))
+    s = solve(problem, MeanGap(pulled.mean_gap), solver="bncg", max_iterations=4000)
+    assert s.converged and s.mean_pressure < 0
+    assert abs(s.mean_gap - pulled.mean_gap) <= 1e-8 * problem.gap_scale
+    assert s.mean_pressure == pytest.approx(pulled.mean_pressure, rel=1e-5)
