@@ -258,9 +258,9 @@ def main():
     if args.worker:
         return worker(args)
 
-    print(f"| N | ranks | solver | iterations | FFT pairs / it | s / it | FFT floor s | "
-          f"evaluation / floor | operator / floor | rest | solve / floor | start s | total s | "
-          f"floor pairs to solution | c | kkt | "
+    print("| N | ranks | solver | iterations | FFT pairs / it | s / it | FFT floor s | "
+          "evaluation / floor | operator / floor | rest | solve / floor | start s | total s | "
+          "floor pairs to solution | c | kkt | "
           "bytes / point | Tamaas its | Tamaas s | Tamaas kkt | time ratio |")
     print("|" + "---|" * 21)
     with tempfile.TemporaryDirectory() as tmp:
