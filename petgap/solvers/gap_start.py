@@ -27,7 +27,12 @@ free map's padded cell has the map's scales, not those of its far surface,
 prolonged is the smooth part of the state, ``g + h`` (the surface's deformed
 position, whose stiffness gives ``p_el``), repeated over each block, and the
 fine gap is that less the fine topography, so that the fine roughness inside
-each block is not smeared into the start.  The coarse solve stops at
+each block is not smeared into the start.  With adhesion, a block whose
+coarse point is at the wall starts at the wall on all its fine points: the
+adhesion holds a patch's interior closed over the fine roughness, and
+prolonging ``g + h`` there would open the half of each block that lies below
+its mean, which the first fine step closes again past the patch's edges, the
+overshoot then released an edge pixel at a time.  The coarse solve stops at
 ``max(tolerance, coarse_tolerance)``; a coarse solve that did not converge
 still gives its state (one with NaN gives none).  The choice depends on the
 grid's shape only, never on the number of ranks.
@@ -84,9 +89,12 @@ def coarse_start_gap(problem, control, settings, solver):
     if not finite:
         return None, description + " (NaN: not used)"
     first_row, whole = cgrid.x_slice.start, coarse.is_whole(grid, cgrid)
+    if problem.interaction.adhesive:
+        smooth[solution.gap <= 0] = np.nan   # marks the blocks that start at the wall
     del solution, level, cgrid  # before the fine solve makes its fields
     gap = coarse.prolong(first_row, grid, smooth, f, whole, out=grid.scratch())
     gap -= problem.topography
+    np.copyto(gap, 0.0, where=np.isnan(gap))
     return gap, description
 
 
