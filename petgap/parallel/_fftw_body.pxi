@@ -29,10 +29,7 @@ def local_size_transposed(MPI.Comm comm, Py_ssize_t n0, Py_ssize_t n1):
         ``alloc_local`` counts complex numbers and bounds both the padded real
         slab and the transposed Fourier slab of this rank.
     """
-    cdef ptrdiff_t ln0 = 0, l0s = 0, ln1 = 0, l1s = 0, alloc
-    alloc = fftw_mpi_local_size_2d_transposed(n0, n1 // 2 + 1, comm.ob_mpi,
-                                              &ln0, &l0s, &ln1, &l1s)
-    return int(alloc), int(ln0), int(l0s), int(ln1), int(l1s)
+    return local_size_lines(comm, n0, n1 // 2 + 1)
 
 
 def padded_line_count(Py_ssize_t cy):
@@ -45,7 +42,8 @@ def padded_line_count(Py_ssize_t cy):
 def local_size_lines(MPI.Comm comm, Py_ssize_t n0, Py_ssize_t nlines):
     """Slab sizes of ``n0`` rows of ``nlines`` complex values transposed to ``nlines`` lines
     of ``n0`` (FFTW-MPI's default blocks): ``(alloc_local, local_n0, local_0_start,
-    local_n1, local_1_start)`` as :func:`local_size_transposed` gives them."""
+    local_n1, local_1_start)``, as for :func:`local_size_transposed` (an r2c row of
+    ``n1`` reals has ``n1 // 2 + 1`` such values)."""
     cdef ptrdiff_t ln0 = 0, l0s = 0, ln1 = 0, l1s = 0, alloc
     alloc = fftw_mpi_local_size_2d_transposed(n0, nlines, comm.ob_mpi, &ln0, &l0s, &ln1, &l1s)
     return int(alloc), int(ln0), int(l0s), int(ln1), int(l1s)
