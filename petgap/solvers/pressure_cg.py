@@ -175,8 +175,7 @@ def polonsky_keer(problem, control, settings=SolverSettings(), *, initial_pressu
     transforms = StepTransforms(problem, settings.search_precision)
     start, description = choose_start(problem, control, settings, initial_pressure, load,
                                       polonsky_keer)
-    cg = PressureCG(problem, settings, monitor, load, target, offset)
-    cg.retarget = retarget
+    cg = PressureCG(problem, settings, monitor, load, target, offset, retarget)
     start_time = timer()
     start_ops = problem.operator_applications
     cg.begin(start, transforms)
@@ -216,7 +215,7 @@ class PressureCG:
     object (:mod:`petgap.solvers.preconditioners`) called once per iteration.
     """
 
-    def __init__(self, problem, settings, monitor, load, target, offset):
+    def __init__(self, problem, settings, monitor, load, target, offset, retarget=None):
         grid = problem.grid
         self.problem, self.settings, self.monitor = problem, settings, monitor
         self.grid, self.comm, self.h = grid, grid.comm, problem.topography
@@ -230,7 +229,7 @@ class PressureCG:
         self.history = []
         self.converged, self.reason, self.it = False, "max_iterations", 0
         self.best, self.best_it = np.inf, 0
-        self.retarget = None
+        self.retarget = retarget   # polonsky_keer's, or None
         self._u = None
 
     @property
