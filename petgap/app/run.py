@@ -29,7 +29,7 @@ from petgap.mechanics.problem import Indentation, Load, MeanGap
 from petgap.parallel.collective import root_decides
 from petgap.solvers.convergence import ResidualTrend
 from petgap.surfaces.measured import length_unit
-from petgap.parallel.log import get_logger
+from petgap.parallel.log import configured, get_logger
 
 
 @dataclass
@@ -73,7 +73,10 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
     with ``complete_already``), and refuses, ``overwrite`` or not, an output
     that is a directory, a device or a file the run reads; builds the scene (:func:`petgap.app.build.build`), creates the result file
     with the provenance and the topography, and solves the planned steps,
-    writing each as soon as it is done.
+    writing each as soon as it is done.  Its progress and each step's verdict go
+    to rank 0 through the ``petgap`` logger, set up to show them if nothing else
+    does (:func:`petgap.parallel.log.configured`): a script that runs a large
+    scene is not left silent for an hour.
 
     Parameters
     ----------
@@ -91,6 +94,7 @@ def run_scene(scene, comm=None, output=None, *, overwrite=False, petsc_args=(), 
     RunResult
     """
     comm = MPI.COMM_WORLD if comm is None else comm
+    configured(comm)
     log = logger or get_logger("run")
     if output is None:
         output = f"{Path(scene.path).stem if scene.path else 'scene'}.h5"

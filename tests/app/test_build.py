@@ -248,6 +248,27 @@ def test_single_precision_run_stores_its_fields_in_32_bits(comm, mpi_tmp_path):
     assert h.dtype == np.float64 and np.array_equal(h, model.topography.astype(np.float64))
 
 
+def test_a_script_running_a_scene_sees_its_steps(comm, mpi_tmp_path, capfd, monkeypatch):
+    """``run_scene`` from a script that set up no logging (``runs/large.py``) still shows
+    rank 0 the run's progress and each step's verdict, as ``petgap run`` does: a large
+    scene is not silent for an hour.  A script's own logging set-up is kept."""
+    import logging
+    import warnings
+    from petgap.app import run_scene
+    logger = logging.getLogger("petgap")
+    monkeypatch.setattr(logger, "handlers", [])
+    monkeypatch.setattr(logger, "propagate", logger.propagate)   # configure() sets these
+    monkeypatch.setattr(logger, "level", logger.level)
+    monkeypatch.setattr(warnings, "showwarning", warnings.showwarning)
+    monkeypatch.setattr(logging.getLogger(), "handlers", [])
+    run_scene(Scene.from_dict(SCENE, comm), comm, mpi_tmp_path / "silent.h5")
+    out = capfd.readouterr().out
+    if comm.rank == 0:
+        assert "step 0 (" in out and "converged after" in out, out
+    else:
+        assert out == ""
+
+
 # ------------------------------------------------------ a series of works of adhesion
 SERIES = dict(PROTOCOL, interaction=dict(PROTOCOL["interaction"],
                                          work_of_adhesion=[1e-4, 2e-4, 4e-4]))
