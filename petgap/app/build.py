@@ -495,14 +495,31 @@ class Model:
         those steps are not solved again.
         """
         states = states or {}
-        # each w of a series starts its own chain, cold from the coarse-grid start: a warm
-        # start from a much less sticky state must grow every patch to its new size, edge
-        # pixel by edge pixel (188 iterations from w = 0.08 to 0.2 at 8192^2, against 22-31
-        # for the cold steps of the same run)
         return [SweepStep(control=protocol.control_of(step), problem=self.problem_of(step),
-                          chain=step.chain if step.work is None else (step.chain, step.work),
-                          state=states.get(step.index))
+                          chain=self.chain_of(step), state=states.get(step.index))
                 for step in self.steps]
+
+    @staticmethod
+    def chain_of(step):
+        """The sweep chain of a planned step: the steps that warm-start each other.
+
+        Each ``w`` of a series starts its own chain, cold from the coarse-grid start: a
+        warm start from a much less sticky state must grow every patch to its new size,
+        edge pixel by edge pixel (188 iterations from ``w = 0.08`` to ``0.2`` at 8192^2,
+        against 22-31 for the cold steps of the same run).
+        """
+        return step.chain if step.work is None else (step.chain, step.work)
+
+    def warm_starts(self, done):
+        """The indices among ``done`` (steps complete in a resumed file) whose fields the
+        next steps start from: the last done step of each chain, if the chain goes on."""
+        last = {}
+        for step in self.steps:
+            chain = self.chain_of(step)
+            if step.index in done:
+                last[chain] = step.index
+            elif chain in last:
+                yield last.pop(chain)
 
     def sweep(self, states=None, **solve_options):
         """:func:`~petgap.solvers.sweeps.sweep` over the planned steps (a generator, collective).

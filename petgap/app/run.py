@@ -305,8 +305,10 @@ def _run_steps(model, output, log, resume):
     done = {}
     if resume:
         with ResultFile.open(output, comm) as result:
-            for index in result.completed_steps():
-                done[index] = _read_step(result, index, grid, fields)
+            complete = list(result.completed_steps())
+            warm = set(model.warm_starts(set(complete)))
+            for index in complete:   # the fields only of the steps a later one starts from
+                done[index] = _read_step(result, index, grid, fields, index in warm)
             result.close(complete=False)
 
     def before(index, control):
@@ -319,7 +321,11 @@ def _run_steps(model, output, log, resume):
     wall_times = []
 
     summaries, patches_told = [], False
-    for step, state in zip(model.steps, model.sweep(done, before=before)):
+    # next() rather than zip: zip's reused result tuple would hold each state's fields
+    # through the next step's solve (8 bytes per point a field)
+    states = model.sweep(done, before=before)
+    for step in model.steps:
+        state = next(states)
         if step.index in done:
             summaries.append(state.summary)
             log.info("step %d (%s): complete in the file, not recomputed", step.index, step.chain)
@@ -332,6 +338,7 @@ def _run_steps(model, output, log, resume):
         summaries.append(summary)
         if not patches_told:   # once a run: the first step with small patches speaks for all
             patches_told = bool(_check_patches(model, step, state, log))
+        del state, flow   # their fields, while the next step is solved (the sweep keeps warm starts)
     return summaries
 
 
@@ -402,19 +409,23 @@ class _SavedState:
                         if k.startswith("solution.")}
 
 
-def _read_step(result, index, grid, fields):
-    """A complete step of a resumed run, as a :class:`_SavedState` (collective)."""
+def _read_step(result, index, grid, fields, warm=True):
+    """A complete step of a resumed run, as a :class:`_SavedState` (collective); its
+    fields only if ``warm`` (the next step of its chain starts from them)."""
     group = result.step(index)
     attrs = result.attrs(group)
     kind, value = attrs["solution.control"], attrs["solution.control_value"]
     control = {"load": Load, "mean-gap": MeanGap, "indentation": Indentation}[kind](value)
-    gap = result.read_field("gap", grid, group=group) if "gap" in group else None
-    pressure = result.read_field("pressure", grid, group=group) if "pressure" in group else None
+    counted = "solution.zero_gap_fraction" not in attrs   # an older file: count it
+    gap = (result.read_field("gap", grid, group=group)
+           if "gap" in group and (warm or counted) else None)
     zero_gap = None
-    if "solution.zero_gap_fraction" not in attrs and gap is not None:
+    if counted and gap is not None:
         zero_gap = grid.comm.allreduce(int(np.count_nonzero(gap <= 0))) / grid.npoints
-    if gap is None or pressure is None:
-        gap = pressure = None  # no fields to warm-start from: the next step starts cold
+    pressure = (result.read_field("pressure", grid, group=group)
+                if warm and gap is not None and "pressure" in group else None)
+    if pressure is None:
+        gap = None  # no fields to warm-start from: the next step starts cold
     return _SavedState(gap, pressure, attrs, control, zero_gap)
 
 

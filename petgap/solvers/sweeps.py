@@ -59,7 +59,11 @@ def sweep(problem, steps, *, initial=None, before=None, **solve_options):
 
     Yields each state as soon as it is found (or, for a step given with its
     ``state``, that state), in the order of ``steps``, so the caller can store
-    it before the next step starts.  Each state gets
+    it before the next step starts.  Besides the step being solved, the sweep
+    holds the state of each chain that has steps to come (their warm start) and
+    the scalars of the others: a caller that lets go of each yielded state before
+    asking for the next keeps a series of chains (the works of adhesion of the
+    paper's protocol) at the memory of one solve and one warm start.  Each state gets
 
     * ``direction``: ``"loading"`` when the control pushes the surfaces together
       (larger load, deeper indentation, smaller mean gap) relative to the previous step,
@@ -98,10 +102,12 @@ def sweep(problem, steps, *, initial=None, before=None, **solve_options):
     **solve_options
         Passed to :func:`petgap.solvers.dispatch.solve` for every step.
     """
+    steps = [step if isinstance(step, SweepStep) else SweepStep(control=step) for step in steps]
+    # the last step of each chain: after it, the chain's state is no warm start, and the
+    # sweep keeps its scalars alone (a series of chains holds no gap and pressure per chain)
+    ends = {step.chain: index for index, step in enumerate(steps)}
     states, previous, rates = [], {}, {}
     for index, step in enumerate(steps):
-        if not isinstance(step, SweepStep):
-            step = SweepStep(control=step)
         chain = step.chain
         last = previous.get(chain, initial)
         state = step.state
@@ -114,7 +120,9 @@ def sweep(problem, steps, *, initial=None, before=None, **solve_options):
             state = solve(step.problem if step.problem is not None else problem, control,
                           initial=warm, **options)
         rates[chain] = annotate_step(state, last, rates.get(chain))
-        previous[chain] = state
+        previous[chain] = (state if ends[chain] > index else
+                           SimpleNamespace(control=state.control, gap=None,
+                                           zero_gap_fraction=state.zero_gap_fraction))
         # what a later step's control may ask of this one, without its fields: a long
         # sweep holds one state per chain (the warm start), not a gap and a pressure per step
         states.append(SimpleNamespace(**state.scalars()) if hasattr(state, "scalars")

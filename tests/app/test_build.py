@@ -352,3 +352,45 @@ def test_fft_planner_by_the_work_ahead(comm):
     assert fft_planner(many) == ("measure", "auto: 2 solves ahead, plans kept as wisdom")
     assert fft_planner(named) == ("patient", "solver.planner")
     assert grid.planner == "estimate"
+
+
+def test_a_run_holds_no_fields_of_its_finished_steps_while_it_solves(comm, mpi_tmp_path,
+                                                                       monkeypatch):
+    """While ``run_scene`` solves a step of a series of works of adhesion, no state of a
+    step before it is alive: each ``w`` is a chain of its own, cold from the coarse grid,
+    so every finished step is written and let go (16 bytes per point a step: at 16384^2
+    the paper's protocol fits the machine only so).  Read at the start of every solve."""
+    import gc
+    import weakref
+    from petgap.app import run as run_module
+    from petgap.solvers import sweeps
+    finished, alive = [], []
+    solve, log_solution = sweeps.solve, run_module._log_solution
+
+    def watched_solve(*args, **kwargs):
+        gc.collect()
+        alive.append(sum(ref() is not None for ref in finished))
+        return solve(*args, **kwargs)
+
+    def watched_log(log, step, state):
+        finished.append(weakref.ref(state))
+        return log_solution(log, step, state)
+    monkeypatch.setattr(sweeps, "solve", watched_solve)
+    monkeypatch.setattr(run_module, "_log_solution", watched_log)
+    series = dict(SERIES, control=dict(SERIES["control"], values=[0.002]))
+    run_module.run_scene(Scene.from_dict(series, comm), comm, mpi_tmp_path / "series.h5")
+    assert len(alive) == 4 and alive == [0, 0, 0, 0]
+
+
+def test_a_resumed_run_reads_the_fields_only_of_its_warm_starts(comm):
+    """Resuming, the steps complete in the file are read back with their fields only where
+    the next step of their chain is still to solve (its warm start); the others give
+    their scalars alone, so a resumed series holds no finished step's fields."""
+    loads = build(Scene.from_dict(SCENE, comm), comm)          # one chain of two loads
+    assert list(loads.warm_starts({0})) == [0]
+    assert list(loads.warm_starts({0, 1})) == []
+    series = build(Scene.from_dict(dict(SERIES, control=dict(SERIES["control"],
+                                                             values=[0.002])), comm), comm)
+    assert [series.chain_of(s) for s in series.steps][1:] == [
+        (series.steps[1].chain, w) for w in (1e-4, 2e-4, 4e-4)]
+    assert list(series.warm_starts({0, 1})) == []               # every chain one step long
