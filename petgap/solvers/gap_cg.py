@@ -211,9 +211,9 @@ def _start(f, initial_gap):
     """
     g, h, comm = f.g, f.h, f.comm
     if initial_gap is not None:
-        g[...] = np.maximum(initial_gap, 0.0)
+        np.maximum(initial_gap, 0.0, out=g)
     else:
-        g[...] = -h
+        np.negative(h, out=g)
     if f.load:
         if initial_gap is None:
             top = comm.allreduce(float(h.max()), op=MPI.MAX)
@@ -572,6 +572,7 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
     f = _Fields(problem, load, target, two_level)
     s = _State(lam=lam, lam_f=lam if load else 0.0)
     _start(f, initial_gap)
+    initial_gap = None   # a cold start's field: not held through the solve
     history = []
     converged, reason, it = False, "max_iterations", 0
     for it in range(max_iterations + 1):
