@@ -297,14 +297,16 @@ cdef inline void _row_to_coarse(const double* row, double[:, ::1] out, Py_ssize_
 
 def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const double[:, ::1] vp,
                     const double[:, ::1] vpp, bint adh, double divisor, double lam_f,
-                    double lam, double[:, ::1] real, double edge, Py_ssize_t x0, Py_ssize_t b,
-                    double[:, ::1] springs, double[:, ::1] rhs):
+                    double lam, double[:, ::1] real, Py_ssize_t x0, Py_ssize_t b,
+                    double[:, ::1] springs, double[:, ::1] rhs, double[:, ::1] counts):
     """:func:`gcg_write_residual` and, in the same pass, the coarse grid's data.
 
-    ``rhs += R r`` (times ``b^2``) of the residual written, and ``springs +=`` the
-    same of the springs: ``edge`` per free neighbour along the row at a point at
-    the wall, ``v''(g)`` elsewhere (``vpp``, or ``-v' / divisor`` where the law fills
-    no ``v''`` field, as in :func:`gcg_direction`; nothing for the hard wall).
+    ``rhs += R r`` (times ``b^2``) of the residual written; ``springs +=`` the same
+    of the free set's springs, ``v''(g)`` off the wall (``vpp``, or ``-v' / divisor``
+    where the law fills no ``v''`` field, as in :func:`gcg_direction`; nothing for the
+    hard wall; the contact's own come from :func:`contact_springs`); ``counts +=``
+    the points at the wall in each coarse cell (cell ``(I, J)`` holds the pixels
+    ``I b .. I b + b - 1`` by ``J b .. J b + b - 1``).
     """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef bint second = vpp is not None
@@ -316,13 +318,36 @@ def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const doub
             for j in range(n):
                 real[i, j] = _free_residual(pel[i, j], g[i, j], vp[i, j], adh, lam_f, lam)
                 if g[i, j] <= 0.0:
-                    row[j] = edge * ((g[i, j - 1 if j > 0 else n - 1] > 0.0) +
-                                     (g[i, j + 1 if j + 1 < n else 0] > 0.0))
+                    row[j] = 0.0
+                    counts[(x0 + i) // b, j // b] += 1.0
                 elif adh:
                     row[j] = vpp[i, j] if second else -vp[i, j] / divisor
                 else:
                     row[j] = 0.0
             _row_to_coarse(&real[i, 0], rhs, x0 + i, b, &w[0], &acc[0])
+            _row_to_coarse(&row[0], springs, x0 + i, b, &w[0], &acc[0])
+
+
+def contact_indicator(const double[:, ::1] g, double[:, ::1] real):
+    """``real = 1_C``, the contact set's indicator (``g <= 0``), on the first columns."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                real[i, j] = 1.0 if g[i, j] <= 0.0 else 0.0
+
+
+def contact_springs(const double[:, ::1] g, const double[:, ::1] real, Py_ssize_t x0,
+                    Py_ssize_t b, double[:, ::1] springs):
+    """``springs += R (1_C real)`` (times ``b^2``): with ``real = K 1_C``, the contact's springs."""
+    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef double[::1] row = np.zeros(n)
+    cdef double[::1] acc = np.zeros(springs.shape[1])
+    cdef double[::1] w = np.arange(b) / <double>b
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                row[j] = real[i, j] if g[i, j] <= 0.0 else 0.0
             _row_to_coarse(&row[0], springs, x0 + i, b, &w[0], &acc[0])
 
 

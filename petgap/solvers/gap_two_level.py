@@ -12,9 +12,7 @@ on it than ``K`` is.  Written out for a smooth ``phi`` and ``g = 1_F phi``::
     g.K g ~ phi.K phi + sum_{x in C} kappa(x) phi(x)^2,   kappa = K 1_C on C,
 
 ``C`` the contact set: the patches act on long waves as springs of stiffness
-``kappa`` per point, which grows like the inverse distance to the patch's edge
-and sums over a patch to about :data:`EDGE_SPRING` per free neighbour along
-the rows of its edge points.  ``K^{-1}`` misses the springs, so the preconditioned
+``kappa`` per point, which grows like the inverse distance to the patch's edge.  ``K^{-1}`` misses the springs, so the preconditioned
 operator has eigenvalues far above 1 on long waves, more of them and larger
 the longer the cell's longest waves are against the patches' spacing: the
 iterations grow with the grid.  The adhesive curvature ``D < 0`` near the
@@ -34,7 +32,7 @@ coarse nodes every ``b`` pixels bilinearly onto the fine grid, ``R = P^T / b^2``
 average the fine grid onto them, ``Fc = R K^{-1} P`` be the coarse compliance
 (a Fourier symbol on the coarse grid, summed over the aliases of the hats'
 spectrum), and ``W = R s`` the springs ``s`` per coarse node: ``kappa`` on the
-contact set, estimated from its edge, plus ``D`` on the free set.  Then
+contact set plus ``D`` on the free set.  Then
 ``A ~ K + R^T W R`` and, by the Sherman-Morrison-Woodbury identity,
 
     A^{-1} ~ K^{-1} - K^{-1} R^T (W^{-1} + Fc)^{-1} R K^{-1}.
@@ -61,16 +59,18 @@ Under load control the mean mode is free; the coarse grid's mean mode gets the
 compliance of the cell's longest wave, and the springs give it the stiffness
 of the contact, which no fixed guess of it has (:mod:`petgap.solvers.gap_cg`).
 
-Cost per iteration: the springs and ``R r`` ride on the pass that writes the
-residual; one pass subtracts the prolongation; a transform pair of the coarse
-grid per coarse iteration (the coarse conjugate gradients run on the fields'
-``rfft2``, where ``H`` is a multiplier), and no transform of the fine grid.
-The springs on the contact set are estimated
-from its edge along the rows (:data:`EDGE_SPRING` per free neighbour), not from
-``K 1_C`` itself (a transform pair whenever ``C`` changes): their sum over the
-patches is what the long waves feel, and the edge count gives it.  Along the
-rows only, because the rows of a slab are whole on every rank: the columns'
-neighbours across a slab's boundary would need a halo exchange.
+Cost per iteration: the free set's springs and ``R r`` ride on the pass that
+writes the residual; one pass subtracts the prolongation; a transform pair of the
+coarse grid per coarse iteration (the coarse conjugate gradients run on the
+fields' ``rfft2``, where ``H`` is a multiplier), and no transform of the fine grid
+but the contact's springs.  Those are ``R (1_C K 1_C)`` itself, one transform pair
+of the fine grid, formed again only once the contact has moved by more than
+:data:`RESPRING` of its points (counted per coarse cell in the residual's pass):
+in the flat middle of a solve, when the set has settled, none.  Why the contact's
+own and not an estimate from its edge: where the interface is sticky the coarse
+model sees the balance of the springs and the softening cell by cell, and an
+estimate right in sum but off by tens of per cent in a cell leaves that balance
+wrong there (``docs/design.md``, the two-level preconditioner).
 """
 import numpy as np
 from mpi4py import MPI
@@ -86,14 +86,10 @@ MIN_SIDE = 4
 #: Relative residual of the coarse system's conjugate gradients, and their limit.
 INNER_TOLERANCE = 1e-6
 MAX_INNER = 500
-#: Spring per free neighbour along a row of a point at the wall, in ``E* / a0``: the
-#: sum of ``K 1_C`` over rough contacts per free neighbour along the rows of their
-#: edge points (twice its sum per pair of neighbouring pixels across the edges in
-#: rows and columns), so that the springs sum to the contact's stiffness on long
-#: waves (module docstring).  The ratio is a property of the half-space and of
-#: how ragged the edges are; it changes little with the contact fraction or the
-#: adhesion (``docs/design.md``, the two-level preconditioner).
-EDGE_SPRING = 1.32
+#: The contact's springs ``R (1_C K 1_C)`` are computed again (one transform pair of the
+#: fine grid) once the points at the wall, counted per coarse cell, have changed by more
+#: than this fraction of their number since they were last computed (module docstring).
+RESPRING = 0.002
 #: Aliases of the hats' spectrum summed a side for the coarse compliance (their
 #: weight falls like the fourth power of the alias' order).
 ALIASES = 4
@@ -162,13 +158,14 @@ class CoarseTerm:
         self.coarse_shape = (grid.shape[0] // block, grid.shape[1] // block)
         self.symbol = coarse_compliance(grid.shape, (grid.Lx, grid.Ly), block, contact_modulus)
         self.symbol[0, 0] = mean_compliance
-        self.edge = EDGE_SPRING * contact_modulus / np.sqrt(grid.dx * grid.dy)
         self.root_symbol = np.sqrt(self.symbol)   # H = Fc^{1/2}
         # the rfft2 columns that are their own mirrors (Parseval's sums, _dot)
         self.own_mirror = (0, -1) if self.coarse_shape[1] % 2 == 0 else (0,)
         self.springs = np.zeros(self.coarse_shape)
         self.rhs = np.zeros(self.coarse_shape)
-        self.inner_iterations = self.clipped = 0
+        self.contact = self.counts = None      # the contact's springs, and its counts then
+        self.stale = True
+        self.inner_iterations = self.clipped = self.respring = 0
 
     def _summed(self, local):
         self.grid.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
@@ -178,13 +175,30 @@ class CoarseTerm:
         """The residual into the FFT buffer (as :func:`petgap.solvers._kernels.gcg_write_residual`),
         and in the same pass ``R r`` and the springs ``W`` of the current gap.
 
-        ``f`` and ``s`` are the gap solver's fields and scalars
+        The contact's springs ``R (1_C K 1_C)`` are formed first, in the buffer, when
+        they are stale: a transform pair, made again only once the contact has moved
+        by more than :data:`RESPRING` of its points (counted per coarse cell, in the
+        residual's pass).  ``f`` and ``s`` are the gap solver's fields and scalars
         (:class:`petgap.solvers.gap_cg._Fields`, :class:`petgap.solvers.gap_cg._State`).
         """
-        local = np.zeros((2,) + self.coarse_shape)
+        fresh = self.contact is None or self.stale
+        if fresh:
+            _k.contact_indicator(f.g, f.padded)
+            f.half_space.apply_in_buffer(inverse=False)               # K 1_C
+            local = np.zeros(self.coarse_shape)
+            _k.contact_springs(f.g, f.padded, self.x0, self.block, local)
+            self.contact = self._summed(local)
+            self.respring += 1
+        local = np.zeros((3,) + self.coarse_shape)
         _k.coarse_residual(f.pel, f.g, f.vp, f.vpp, f.adhesive, f.divisor, s.lam_f, s.lam,
-                           f.padded, self.edge, self.x0, self.block, local[0], local[1])
-        self.springs, self.rhs = self._summed(local)
+                           f.padded, self.x0, self.block, local[0], local[1], local[2])
+        free, self.rhs, counts = self._summed(local)
+        self.springs = free + self.contact
+        if fresh:
+            self.counts, self.stale = counts, False
+        else:
+            moved = float(np.abs(counts - self.counts).sum())
+            self.stale = moved > RESPRING * float(self.counts.sum())
 
     def _dot(self, a, b):
         """``sum a b`` of two real coarse fields given by their ``rfft2`` (Parseval, up to ``1/N``).

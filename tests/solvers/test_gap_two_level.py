@@ -26,7 +26,7 @@ from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers import _kernels as _k
 from petgap.solvers.gap_cg import gap_cg
-from petgap.solvers.gap_two_level import (EDGE_SPRING, INNER_TOLERANCE, CoarseTerm,
+from petgap.solvers.gap_two_level import (INNER_TOLERANCE, CoarseTerm,
                                           coarse_compliance)
 from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
@@ -74,12 +74,12 @@ def test_transfer_kernels_are_the_hat_matrices(comm):
     y = rng.standard_normal((8, 6))
     pel = np.ascontiguousarray(whole[grid.x_slice])
     g = np.ones(grid.local_shape)
-    local = np.zeros((2, 8, 6))
-    _k.coarse_residual(pel, g, pel, None, False, 1.0, 0.0, 0.0, grid.padded, 1.0,
-                       grid.x_slice.start, b, local[0], local[1])
+    local = np.zeros((3, 8, 6))
+    _k.coarse_residual(pel, g, pel, None, False, 1.0, 0.0, 0.0, grid.padded,
+                       grid.x_slice.start, b, local[0], local[1], local[2])
     comm.Allreduce(MPI.IN_PLACE, local)
     assert np.array_equal(grid.real, pel)
-    assert not np.any(local[0])
+    assert not np.any(local[0]) and not np.any(local[2])
     assert np.allclose(local[1], px.T @ whole @ py, rtol=0, atol=1e-12 * np.abs(whole).sum())
     grid.real[...] = 0.0
     _k.coarse_subtract(grid.padded, grid.ny, y, grid.x_slice.start, b)
@@ -181,12 +181,13 @@ def test_the_option_reaches_the_gap_solver(comm):
 
 
 @pytest.mark.parametrize("work", [0.0, 0.05])
-def test_springs_sum_to_the_contacts_stiffness(comm, work):
-    """The springs the residual pass puts on the contact set (:data:`EDGE_SPRING` per free
-    neighbour along a row) sum to ``1_C . K 1_C``, the contact's stiffness on long waves,
-    within a fifth, on a rough hard-wall contact and an adhesive one, on ``comm``'s slabs.
-    Springs at half of it leave the coarse model softer than the interface where the
-    adhesion's softening meets them (the module docstring)."""
+def test_springs_are_the_contacts_stiffness(comm, work):
+    """The coarse term's springs are ``R (1_C K 1_C)`` on the contact set plus ``R v''(g)``
+    off it, to round-off, on a rough hard-wall contact and an adhesive one, on ``comm``'s
+    slabs: the contact's own stiffness cell by cell, which a count of edge neighbours
+    gives only in sum (the module docstring: near sticky edges the coarse model sees the
+    balance of the springs and the softening)."""
+    from petgap.solvers.gap_cg import _Fields, _State
     grid = Grid((256, 256), comm=comm, planner="estimate")
     h = self_affine(grid, 0.8, 32 * grid.dx, 0.5 * grid.Lx, rms_slope=0.1, seed=7)
     law = ExponentialAdhesion(work * E_STAR * grid.dx, 4 * grid.dx) if work else None
@@ -194,12 +195,19 @@ def test_springs_sum_to_the_contacts_stiffness(comm, work):
     state = gap_cg(problem, Load(0.002 * E_STAR), SolverSettings(tolerance=1e-6))
     contact = (state.gap <= 0).astype(float)
     stiffness = problem.elastic_pressure(contact - h)          # K 1_C
-    b = 16
-    local = np.zeros((2, grid.nx // b, grid.ny // b))
-    _k.coarse_residual(state.gap, state.gap, state.gap, None, False, 1.0, 0.0, 0.0,
-                       grid.padded, EDGE_SPRING * E_STAR / grid.dx, grid.x_slice.start, b,
-                       local[0], local[1])
-    springs, exact = (comm.allreduce(float(x)) for x in
-                      (local[0].sum(), np.sum(contact * stiffness)))
+    f = _Fields(problem, True, None, two_level=True)
+    f.g[...] = state.gap
+    f.fill_stress()
+    f.coarse.write_residual(f, _State())
+    b = f.coarse.block
+    curvature = -f.vp / f.divisor if work else 0.0
+    fine = np.where(contact > 0, stiffness, curvature)
+    whole = np.zeros((grid.nx, grid.ny))
+    whole[grid.x_slice] = fine
+    comm.Allreduce(MPI.IN_PLACE, whole)
+    px, py = hats(grid.nx, b), hats(grid.ny, b)
+    expected = px.T @ whole @ py / b ** 2
     assert 0.02 < comm.allreduce(float(contact.sum())) / grid.npoints < 0.3
-    assert 0.8 < springs / exact < 1.25
+    assert np.allclose(f.coarse.springs, expected, rtol=0,
+                       atol=1e-12 * np.abs(expected).max())
+    assert f.coarse.respring == 1
