@@ -337,18 +337,21 @@ def contact_indicator(const double[:, ::1] g, double[:, ::1] real):
                 real[i, j] = 1.0 if g[i, j] <= 0.0 else 0.0
 
 
-def contact_springs(const double[:, ::1] g, const double[:, ::1] real, Py_ssize_t x0,
+def contact_springs(const double[:, ::1] g, double[:, ::1] real, Py_ssize_t x0,
                     Py_ssize_t b, double[:, ::1] springs):
-    """``springs += R (1_C real)`` (times ``b^2``): with ``real = K 1_C``, the contact's springs."""
+    """``springs += R (1_C real)`` (times ``b^2``): with ``real = K 1_C``, the contact's springs.
+
+    ``real`` is left holding ``1_C real`` (the FFT buffer, read once).
+    """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double[::1] row = np.zeros(n)
     cdef double[::1] acc = np.zeros(springs.shape[1])
     cdef double[::1] w = np.arange(b) / <double>b
     with nogil:
         for i in range(m):
             for j in range(n):
-                row[j] = real[i, j] if g[i, j] <= 0.0 else 0.0
-            _row_to_coarse(&row[0], springs, x0 + i, b, &w[0], &acc[0])
+                if g[i, j] > 0.0:
+                    real[i, j] = 0.0
+            _row_to_coarse(&real[i, 0], springs, x0 + i, b, &w[0], &acc[0])
 
 
 def coarse_subtract(double[:, ::1] real, Py_ssize_t ny, const double[:, ::1] y,
