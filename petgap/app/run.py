@@ -338,7 +338,7 @@ def _run_steps(model, output, log, resume):
         summaries.append(summary)
         if not patches_told:   # once a run: the first step with small patches speaks for all
             patches_told = bool(_check_patches(model, step, state, log))
-        del state, flow   # their fields, while the next step is solved (the sweep keeps warm starts)
+        del state, flow   # not held through the next step's solve (the sweep keeps warm starts)
     return summaries
 
 

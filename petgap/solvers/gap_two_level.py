@@ -12,9 +12,10 @@ on it than ``K`` is.  Written out for a smooth ``phi`` and ``g = 1_F phi``::
     g.K g ~ phi.K phi + sum_{x in C} kappa(x) phi(x)^2,   kappa = K 1_C on C,
 
 ``C`` the contact set: the patches act on long waves as springs of stiffness
-``kappa`` per point, which grows like the inverse distance to the patch's edge.  ``K^{-1}`` misses the springs, so the preconditioned
-operator has eigenvalues far above 1 on long waves, more of them and larger
-the longer the cell's longest waves are against the patches' spacing: the
+``kappa`` per point, which grows like the inverse distance to the patch's edge.
+``K^{-1}`` misses the springs, so the preconditioned operator has eigenvalues far
+above 1 on long waves, more of them and larger the longer the cell's longest waves
+are against the patches' spacing: the
 iterations grow with the grid.  The adhesive curvature ``D < 0`` near the
 patches softens the same waves and lowers the smallest eigenvalues.
 
