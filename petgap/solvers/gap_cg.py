@@ -45,7 +45,9 @@ Controls: under mean-gap control directions have zero mean over ``F`` and
 ``P0 = -mean_F(grad)`` is estimated every iteration; under load control ``P0``
 is given and the mean mode is free.  Each iteration applies ``K^{-1}`` (the
 preconditioner) and ``K`` (the curvature along the direction): two transform
-pairs when the projection does not act, two and a half when it does.
+pairs when the projection does not act, two and a half when it does, and one
+more where the coarse term forms its contact springs again
+(:mod:`petgap.solvers.gap_two_level`).
 
 Convergence: the largest ``|grad + P0|`` over ``F`` relative to ``h0' E*``
 (:meth:`petgap.mechanics.problem.ContactProblem.kkt_residuals`), judged on a
