@@ -182,7 +182,7 @@ class CoarseTerm:
         residual's pass).  ``f`` and ``s`` are the gap solver's fields and scalars
         (:class:`petgap.solvers.gap_cg._Fields`, :class:`petgap.solvers.gap_cg._State`).
         """
-        fresh = self.contact is None or self.stale
+        fresh = self.stale   # True until the first springs are formed
         if fresh:
             _k.contact_indicator(f.g, f.padded)
             f.half_space.apply_in_buffer(inverse=False)               # K 1_C

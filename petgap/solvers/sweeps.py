@@ -61,7 +61,7 @@ def sweep(problem, steps, *, initial=None, before=None, **solve_options):
     ``state``, that state), in the order of ``steps``, so the caller can store
     it before the next step starts.  Besides the step being solved, the sweep
     holds the state of each chain that has steps to come (their warm start) and
-    the scalars of the others: a caller that lets go of each yielded state before
+    the scalars of every step (what a later control may ask): a caller that lets go of each yielded state before
     asking for the next keeps a series of chains (the works of adhesion of the
     paper's protocol) at the memory of one solve and one warm start.  Each state gets
 
@@ -104,7 +104,7 @@ def sweep(problem, steps, *, initial=None, before=None, **solve_options):
     """
     steps = [step if isinstance(step, SweepStep) else SweepStep(control=step) for step in steps]
     # the last step of each chain: after it, the chain's state is no warm start, and the
-    # sweep keeps its scalars alone (a series of chains holds no gap and pressure per chain)
+    # sweep lets it go (a series of chains holds no gap and pressure per chain)
     ends = {step.chain: index for index, step in enumerate(steps)}
     states, previous, rates = [], {}, {}
     for index, step in enumerate(steps):
@@ -120,9 +120,10 @@ def sweep(problem, steps, *, initial=None, before=None, **solve_options):
             state = solve(step.problem if step.problem is not None else problem, control,
                           initial=warm, **options)
         rates[chain] = annotate_step(state, last, rates.get(chain))
-        previous[chain] = (state if ends[chain] > index else
-                           SimpleNamespace(control=state.control, gap=None,
-                                           zero_gap_fraction=state.zero_gap_fraction))
+        if ends[chain] > index:
+            previous[chain] = state
+        else:   # no step of the chain comes: nothing reads its state again
+            previous.pop(chain, None)
         # what a later step's control may ask of this one, without its fields: a long
         # sweep holds one state per chain (the warm start), not a gap and a pressure per step
         states.append(SimpleNamespace(**state.scalars()) if hasattr(state, "scalars")
