@@ -153,7 +153,8 @@ def padded_symbol(grid, contact_modulus):
     nx, ny, dx, dy = grid.nx, grid.ny, grid.dx, grid.dy
     plans = grid.zero_padded_plans(planner="estimate", precision="double")
     first, count = grid.x_slice.start, grid.local_shape[0]
-    rows = plans.rows[:count * ny].reshape(count, ny)   # ky = 0 .. ny - 1, ny packed into 0
+    rs, ls = plans.row_stride, plans.line_stride
+    rows = plans.rows[:count * rs].reshape(count, rs)[:, :ny]   # ky = 0 .. ny - 1, ny packed into 0
     for block in row_blocks(count, ncols=ny + 1):
         along_y = _dct1(influence_grid(first + block.start, first + block.stop, 0, ny + 1,
                                        dx, dy, contact_modulus))
@@ -161,7 +162,7 @@ def padded_symbol(grid, contact_modulus):
         rows[block, 0] += 1j * along_y[:, ny]
     plans.transpose()
     n1 = plans.local_n1
-    lines = plans.lines[:n1 * nx].reshape(n1, nx)
+    lines = plans.lines[:n1 * ls].reshape(n1, ls)[:, :nx]
     ky = plans.kernel_ky   # this rank's lines, then the packed line's Nyquist ky = ny
     last = _dct1(influence_grid(nx, nx + 1, 0, ny + 1, dx, dy, contact_modulus)[0])[ky]
     symbol = np.empty((len(ky), nx + 1))

@@ -665,7 +665,10 @@ cdef class PaddedConvolutionPlans:
        (:func:`padded_line_count`): the transpose's shape is then the map's own
        factors, which FFTW's in-place transpose moves faster than ``cy / 2 + 1``
        (odd for every even ``cy``);
-    2. a global transpose of these ``nx x padded_line_count(cy)`` values;
+    2. a global transpose of these ``nx x padded_line_count(cy)`` values (with
+       ``square``, on one rank, as the square matrix of their larger side: the rows'
+       tails and the rows past ``nx`` are padding that the transposes move and no
+       stage reads);
     3. per Fourier line (``ky``), the ``cx``-point transform along ``x`` of the
        line's ``nx`` values and the zeros after them, the multiplication by the
        kernel's transform, and the inverse transform, a few lines at a time in
@@ -709,6 +712,10 @@ cdef class PaddedConvolutionPlans:
         the caller.
     planner : str
         FFTW planner effort; measuring overwrites the buffers.
+    square : bool
+        Transpose as a square ``max(nx, padded_line_count(cy))`` matrix (one rank; the
+        buffers hold its square): FFTW moves a square matrix in place much faster than
+        a non-square one (:meth:`petgap.parallel.grid.Grid.zero_padded_plans`).
 
     The kernel's transform (:meth:`set_kernel`) is real and even in ``x``: row
     ``j`` holds it at ``kx = 0 .. cx // 2`` for ``ky = kernel_ky[j]``, divided by
@@ -727,6 +734,7 @@ cdef class PaddedConvolutionPlans:
     cdef fftw_complex *lines_data
     cdef const double *kernel_data
     cdef Py_ssize_t nx, ny, cx, cy, nyc, nyl, ln0, width
+    cdef Py_ssize_t rs, ls        # complex values from one row (line) to the next in its buffer
     cdef Py_ssize_t nyquist_row   # the kernel row of the packed line's Nyquist part, or -1
     cdef bint packed
     cdef int nrows[2]
@@ -735,6 +743,8 @@ cdef class PaddedConvolutionPlans:
     #: the buffers (for :meth:`transpose`'s caller) and the Fourier lines held here
     cdef readonly object rows, lines
     cdef readonly Py_ssize_t local_n1, local_1_start
+    #: whether the transposes move a square ``max(nx, nyl)`` matrix (one rank)
+    cdef readonly bint square
     #: True between a begin and :meth:`end`; every other use of the plans clears it
     cdef public bint half_made
 
@@ -751,7 +761,7 @@ cdef class PaddedConvolutionPlans:
     def __init__(self, MPI.Comm comm, Py_ssize_t nx, Py_ssize_t ny, Py_ssize_t cx,
                  Py_ssize_t cy, Py_ssize_t local_n0, Py_ssize_t local_n1,
                  Py_ssize_t local_1_start, Py_ssize_t width, cnp.ndarray rows,
-                 cnp.ndarray lines, str planner="measure"):
+                 cnp.ndarray lines, str planner="measure", bint square=False):
         if planner not in PLANNER_FLAGS:
             raise ValueError(f"planner={planner!r} is not one of {sorted(PLANNER_FLAGS)}")
         for name, a in (("rows", rows), ("lines", lines)):
@@ -766,7 +776,15 @@ cdef class PaddedConvolutionPlans:
         self.nyl = padded_line_count(cy)
         self.packed = self.nyl != self.nyc
         self.nyquist_row = local_n1 if self.packed and local_1_start == 0 and local_n1 > 0 else -1
-        if rows.size < local_n0 * self.nyl or lines.size < local_n1 * nx:
+        if square and comm.size != 1:
+            raise ValueError(f"square=True needs one rank, not {comm.size}: on more, the "
+                             f"padding lines would go to ranks that then hold none of the "
+                             f"map's lines")
+        self.square = square
+        cdef Py_ssize_t side = max(nx, self.nyl)
+        self.rs, self.ls = (side, side) if square else (self.nyl, nx)
+        if rows.size < local_n0 * self.rs or lines.size < local_n1 * self.ls or (
+                square and min(rows.size, lines.size) < side * side):
             raise ValueError("the row or line buffer is too small for this rank's part")
         self.comm, self.rows, self.lines = comm, rows, lines
         self.nx, self.ny, self.cx, self.cy = nx, ny, cx, cy
@@ -777,7 +795,8 @@ cdef class PaddedConvolutionPlans:
         cdef unsigned flags = PLANNER_FLAGS[planner]
         cdef int n_y = <int>cy, n_x = <int>cx
         cdef int row_width = <int>(2 * self.nyc), ncomplex = <int>self.nyc
-        cdef int nlines_row = <int>self.nyl
+        cdef int nlines_row = <int>(side if square else self.nyl)
+        cdef int nrows_map = <int>(side if square else nx)
         cdef int *nrows = self.nrows
         cdef int *nlines = self.nlines
         cdef MPI_Comm mcomm = comm.ob_mpi
@@ -790,10 +809,10 @@ cdef class PaddedConvolutionPlans:
         cdef bint ok = True
         with nogil:
             self.transpose_fwd = fftw_mpi_plan_many_transpose(
-                nx, nlines_row, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
+                nrows_map, nlines_row, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
                 <real_t *>self.rows_data, <real_t *>self.lines_data, mcomm, flags)
             self.transpose_bwd = fftw_mpi_plan_many_transpose(
-                nlines_row, nx, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
+                nlines_row, nrows_map, 2, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK,
                 <real_t *>self.lines_data, <real_t *>self.rows_data, mcomm, flags)
             for k in range(2):
                 if nrows[k] > 0:
@@ -832,6 +851,16 @@ cdef class PaddedConvolutionPlans:
                              f"need ({nk}, {self.cx // 2 + 1})")
         self.kernel = kernel
         self.kernel_data = &kernel[0, 0] if nk > 0 else NULL
+
+    @property
+    def row_stride(self):
+        """Complex values from one row to the next in the rows buffer."""
+        return self.rs
+
+    @property
+    def line_stride(self):
+        """Complex values from one line to the next in the lines buffer."""
+        return self.ls
 
     def transpose(self):
         """The rows buffer's ``(local_n0, padded_line_count(cy))`` values to the lines buffer,
@@ -888,16 +917,17 @@ cdef class PaddedConvolutionPlans:
     cdef inline void _rows_forward(self, Py_ssize_t i0, Py_ssize_t m, int which) noexcept nogil:
         """The block's rows transformed along ``y`` in place, then to the rows buffer (each
         row's Nyquist value, if any, packed into its ``ky = 0`` value's imaginary part)."""
-        cdef Py_ssize_t r, nyc = self.nyc, nyl = self.nyl
+        cdef Py_ssize_t r, nyc = self.nyc, nyl = self.nyl, rs = self.rs
         cdef fftw_complex *c
         fftw_execute(self.rows_fwd[which])
-        if not self.packed:
+        if not self.packed and rs == nyl:
             memcpy(self.rows_data + i0 * nyl, self.block, m * nyl * sizeof(fftw_complex))
             return
         for r in range(m):
             c = <fftw_complex *>self.block + r * nyc
-            (<real_t *>c)[1] = (<real_t *>(c + nyc - 1))[0]
-            memcpy(self.rows_data + (i0 + r) * nyl, c, nyl * sizeof(fftw_complex))
+            if self.packed:
+                (<real_t *>c)[1] = (<real_t *>(c + nyc - 1))[0]
+            memcpy(self.rows_data + (i0 + r) * rs, c, nyl * sizeof(fftw_complex))
 
     cdef double _lines_pass(self, bint form) noexcept nogil:
         """Stage 3 on the transposed rows in the lines buffer.
@@ -909,14 +939,14 @@ cdef class PaddedConvolutionPlans:
         ``p`` is zero off it.  Without, the transforms, the kernel and the inverse
         transforms, the map's part back to the lines buffer.
         """
-        cdef Py_ssize_t j0 = 0, j, g, m, nx = self.nx, n = self.cx
+        cdef Py_ssize_t j0 = 0, j, g, m, nx = self.nx, n = self.cx, ls = self.ls
         cdef int which
         cdef double total = 0.0, weight
         while j0 < self.local_n1:
             m = min(<Py_ssize_t>self.nlines[0], self.local_n1 - j0)
             which = 0 if m == self.nlines[0] else 1
             for j in range(m):
-                memcpy(self.line + j * n, self.lines_data + (j0 + j) * nx,
+                memcpy(self.line + j * n, self.lines_data + (j0 + j) * ls,
                        nx * sizeof(fftw_complex))
                 memset(self.line + j * n + nx, 0, (n - nx) * sizeof(fftw_complex))
             fftw_execute(self.lines_fwd[which])
@@ -940,7 +970,7 @@ cdef class PaddedConvolutionPlans:
                     self._multiply_line(j0 + j, <real_t *>(self.line + j * n))
             fftw_execute(self.lines_bwd[which])
             for j in range(m):
-                memcpy(self.lines_data + (j0 + j) * nx, self.line + j * n,
+                memcpy(self.lines_data + (j0 + j) * ls, self.line + j * n,
                        nx * sizeof(fftw_complex))
             j0 += self.nlines[0]
         return total
@@ -1011,19 +1041,23 @@ cdef class PaddedConvolutionPlans:
         to the ``ns`` points ``pidx``."""
         cdef Py_ssize_t i0 = 0, m, r, k = 0, base, end, p
         cdef Py_ssize_t ny = self.ny, w = self.width, w2 = 2 * self.nyc
-        cdef Py_ssize_t nyc = self.nyc, nyl = self.nyl
+        cdef Py_ssize_t nyc = self.nyc, nyl = self.nyl, rs = self.rs
         cdef fftw_complex *c
         cdef int which
         fftw_execute(self.transpose_bwd)
         while i0 < self.ln0:
             m = min(<Py_ssize_t>self.nrows[0], self.ln0 - i0)
             which = 0 if m == self.nrows[0] else 1
-            if not self.packed:
+            if not self.packed and rs == nyl:
                 memcpy(self.block, self.rows_data + i0 * nyl, m * nyl * sizeof(fftw_complex))
+            elif not self.packed:
+                for r in range(m):
+                    memcpy(<fftw_complex *>self.block + r * nyc, self.rows_data + (i0 + r) * rs,
+                           nyl * sizeof(fftw_complex))
             else:
                 for r in range(m):   # unpack the Nyquist value from the imaginary part of ky = 0
                     c = <fftw_complex *>self.block + r * nyc
-                    memcpy(c, self.rows_data + (i0 + r) * nyl, nyl * sizeof(fftw_complex))
+                    memcpy(c, self.rows_data + (i0 + r) * rs, nyl * sizeof(fftw_complex))
                     (<real_t *>(c + nyc - 1))[0] = (<real_t *>c)[1]
                     (<real_t *>(c + nyc - 1))[1] = 0
                     (<real_t *>c)[1] = 0

@@ -36,6 +36,10 @@ WISDOM_DIR_ENV = "PETGAP_WISDOM_DIR"
 #: The binding of each precision (the same source, ``_fftw_body.pxi``, on FFTW's double
 #: and single libraries).
 BINDINGS = {"double": _fftw_mpi, "single": _fftw_mpi_single}
+#: How much larger than its own part a padded convolution's buffer may grow for square
+#: transposes on one rank (:meth:`Grid.zero_padded_plans`): a ``2048 x 1536`` map's is
+#: ``4 / 3`` of it.
+SQUARE_GROWTH = 1.5
 #: Wisdom files this process imported as rank 0 of a communicator: path -> the
 #: file's (modification time, size) and the world ranks of that communicator.
 #: FFTW keeps imported wisdom for the life of the process, so reading the same
@@ -307,20 +311,29 @@ class Grid:
                             f"{self.dtype} ({self.precision} precision)")
         self._convolution.end(out)
 
-    def zero_padded_plans(self, cell=None, planner=None, precision=None, buffers=None):
+    def zero_padded_plans(self, cell=None, planner=None, precision=None, buffers=None,
+                          square=None):
         """Plans of a linear convolution over this grid's map by zero padding to a larger cell.
 
         ``cell``: the periodic cell's shape, ``(2 nx, 2 ny)`` by default (Hockney's).
 
         :class:`petgap.parallel._fftw_mpi.PaddedConvolutionPlans` in this grid's precision,
         on a buffer of their own (the map's rows transformed along ``y``, transposed in
-        place: half the padded cell's, and faster than two) and this grid's rows; fields and flat indices are in rows of the
-        padded slab's width, like :attr:`padded`'s.  The caller gives the kernel
-        (``set_kernel``).  Collective; planned with this grid's effort and wisdom
-        unless ``planner`` says otherwise; ``precision`` other than the grid's (a
-        double kernel for single plans) goes without wisdom.  ``buffers``: the
-        ``(rows, lines)`` of other such plans of a cell at least as large, to share
-        (each use of either plans then overwrites the other's; planning too).
+        place: half the padded cell's, and faster than two) and this grid's rows; fields
+        and flat indices are in rows of the padded slab's width, like :attr:`padded`'s.
+        The caller gives the kernel (``set_kernel``).  Collective; planned with this
+        grid's effort and wisdom unless ``planner`` says otherwise; ``precision`` other
+        than the grid's (a double kernel for single plans) goes without wisdom.
+        ``buffers``: the ``(rows, lines)`` of other such plans of a cell at least as large,
+        to share (each use of either plans then overwrites the other's; planning too).
+
+        ``square``: whether the transposes move the ``nx`` rows of ``nl`` Fourier values as
+        a square ``max(nx, nl)`` matrix (one rank only).  FFTW transposes a square matrix
+        in place by swapping pairs, a non-square one by following cycles through the
+        whole buffer, several times slower per value; the padding's rows and lines are
+        moved but never transformed.  By default square where it pays for itself: on
+        one rank, for a non-square transpose, when the square fits in the shared
+        ``buffers`` or costs at most :data:`SQUARE_GROWTH` times the buffer's own size.
         """
         planner = self.planner if planner is None else planner
         precision = self.precision if precision is None else precision
@@ -331,6 +344,13 @@ class Grid:
         if (ln0, l0s) != (self.local_shape[0], self.x_slice.start):
             raise DecompositionError(f"the padded rows of a {self.nx} x {self.ny} map are split "
                                      f"unlike the map's ({ln0} from {l0s} here)")
+        lines_count = _fftw_mpi.padded_line_count(cy)
+        side = max(self.nx, lines_count)
+        if square is None:   # the rule in this method's docstring
+            room = alloc * SQUARE_GROWTH if buffers is None else min(b.size for b in buffers)
+            square = self.comm.size == 1 and self.nx != lines_count and side * side <= room
+        if square:
+            alloc = max(alloc, side * side)
         if buffers is None:
             rows = lines = _aligned_empty(alloc, binding.COMPLEX_DTYPE)
         else:
@@ -339,7 +359,8 @@ class Grid:
         if wisdom:
             self._load_wisdom()
         plans = binding.PaddedConvolutionPlans(self.comm, self.nx, self.ny, cx, cy, ln0, ln1,
-                                               l1s, self.padded.shape[1], rows, lines, planner)
+                                               l1s, self.padded.shape[1], rows, lines, planner,
+                                               bool(square))
         if wisdom:
             self._save_wisdom()
         return plans

@@ -26,22 +26,30 @@ def _reference(p, symbol, cell):
     return np.fft.irfft2(np.fft.rfft2(padded) * symbol, s=cell)[:nx, :ny]
 
 
-def _plans(grid, cell, symbol):
+def _plans(grid, cell, symbol, square=None):
     cx, cy = (2 * grid.nx, 2 * grid.ny) if cell is None else cell
-    plans = grid.zero_padded_plans(cell, planner="estimate")
+    plans = grid.zero_padded_plans(cell, planner="estimate", square=square)
     plans.set_kernel(np.ascontiguousarray(symbol[:cx // 2 + 1, plans.kernel_ky].T) / (cx * cy))
     return plans
 
 
+@pytest.mark.parametrize("square", [None, False, True])
 @pytest.mark.parametrize("precision", ["double", "single"])
 @pytest.mark.parametrize("shape, cell", SHAPES_AND_CELLS)
-def test_pruned_equals_the_full_padded_transform(comm, shape, cell, precision):
+def test_pruned_equals_the_full_padded_transform(comm, shape, cell, precision, square):
     """Whole, sparse, gathered and split (begin / end) applications equal the full cell's
-    transform to round-off, and the form of a begin is ``(p, k * p)``, on any rank count."""
+    transform to round-off, and the form of a begin is ``(p, k * p)``, on any rank count;
+    square transposes (one rank) move padding that no stage reads (NaN before the first
+    use)."""
+    if square and comm.size > 1:
+        pytest.skip("square transposes are for one rank")
     grid = Grid(shape, comm=comm, planner="estimate", wisdom=False, precision=precision)
     full_cell = (2 * shape[0], 2 * shape[1]) if cell is None else cell
     symbol = _symbol(full_cell)
-    plans = _plans(grid, cell, symbol)
+    plans = _plans(grid, cell, symbol, square)
+    if square is not None:
+        assert plans.square == square
+    plans.rows[...] = np.nan
     p = np.random.default_rng(1).standard_normal(shape)   # the same on every rank
     p[np.random.default_rng(2).random(shape) < 0.4] = 0.0
     expected = _reference(p, symbol, full_cell)[grid.x_slice]
@@ -97,3 +105,18 @@ def test_cell_smaller_than_the_map_is_refused(comm):
     grid = Grid((8, 6), comm=comm, planner="estimate", wisdom=False)
     with pytest.raises(ValueError, match="does not hold a 8 x 6 map"):
         grid.zero_padded_plans((7, 12))
+
+
+def test_square_transposes_refused_on_more_ranks(comm):
+    """``square=True`` on more than one rank: a ValueError naming it, on every rank; the
+    default rule takes square transposes where they fit, on one rank only."""
+    grid = Grid((12, 10), comm=comm, planner="estimate", wisdom=False)
+    if comm.size > 1:
+        with pytest.raises(ValueError, match=f"square=True needs one rank, not {comm.size}"):
+            grid.zero_padded_plans(planner="estimate", square=True)
+    plans = grid.zero_padded_plans(planner="estimate")
+    assert plans.square == (comm.size == 1)
+    assert (plans.row_stride, plans.line_stride) == ((12, 12) if comm.size == 1 else (10, 12))
+    # a 16 x 5 map's lines are 5: the square would be more than SQUARE_GROWTH its buffer
+    assert not Grid((16, 5), comm=comm, planner="estimate", wisdom=False).zero_padded_plans(
+        planner="estimate").square
