@@ -78,10 +78,15 @@ from mpi4py import MPI
 
 from petgap.solvers import _kernels as _k
 
-#: Pixels between coarse nodes (the side of a coarse cell) at most grid sizes.
+#: Pixels between coarse nodes (the side of a coarse cell).  The springs and the
+#: softening of one patch's edge must fall into cells of their own for the coarse model to
+#: see their balance, and cells twice as large cost the sticky side a quarter more
+#: iterations; cells half as large leave the coarse system too stiff to solve in few
+#: inner iterations and made a sticky mean-gap solve slower (docs/design.md).
 BLOCK = 16
-#: The coarse grid has at most this many nodes a side; larger cells beyond.
-MAX_SIDE = 256
+#: The coarse grid has at most this many nodes a side, larger cells beyond (past
+#: 16384^2): the coarse system is solved on every rank, by transforms of the coarse grid.
+MAX_SIDE = 1024
 #: With fewer nodes a side the cell is too small for the term to matter.
 MIN_SIDE = 4
 #: Relative residual of the coarse system's conjugate gradients, and their limit.

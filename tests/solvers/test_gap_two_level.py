@@ -12,7 +12,8 @@
   even and odd coarse sides;
 * a two-level adhesive solve reaches the state of the default solver to the
   tolerance's reach, and the same state on 1 rank and on ``comm``;
-* the springs on the contact set sum to the contact's stiffness ``1_C . K 1_C``.
+* the springs on the contact set sum to the contact's stiffness ``1_C . K 1_C``;
+* the coarse cell is 16 pixels a side at every grid up to 16384^2.
 """
 import math
 
@@ -26,7 +27,7 @@ from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers import _kernels as _k
 from petgap.solvers.gap_cg import gap_cg
-from petgap.solvers.gap_two_level import (INNER_TOLERANCE, CoarseTerm,
+from petgap.solvers.gap_two_level import (INNER_TOLERANCE, CoarseTerm, block_for,
                                           coarse_compliance)
 from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
@@ -211,3 +212,14 @@ def test_springs_are_the_contacts_stiffness(comm, work):
     assert np.allclose(f.coarse.springs, expected, rtol=0,
                        atol=1e-12 * np.abs(expected).max())
     assert f.coarse.respring == 1
+
+
+@pytest.mark.parametrize("shape, block", [((64, 64), 16), ((8192, 8192), 16),
+                                          ((16384, 16384), 16), ((16384, 8192), 16),
+                                          ((32768, 32768), 32), ((48, 40), 0), ((200, 64), 0)])
+def test_coarse_cells_are_16_pixels_up_to_16384(shape, block):
+    """16-pixel cells wherever they fit, 1024 nodes a side at most (so 32 at 32768^2);
+    no coarse term where the grid is not a whole number of cells or has fewer than 4.
+    Why not larger cells at 8192^2 and 16384^2: the sticky side's iterations grow with the
+    cell (docs/design.md, the two-level preconditioner)."""
+    assert block_for(shape) == block
