@@ -210,11 +210,15 @@ class CoarseTerm:
         """``sum a b`` of two real coarse fields given by their ``rfft2`` (Parseval, up to ``1/N``).
 
         The half plane holds every other column once and its mirror implicitly:
-        twice its sum, less the columns that are their own mirrors.
+        twice its sum, less the columns that are their own mirrors.  Each such column
+        is copied before its product: ``vdot`` of a strided complex column (BLAS
+        ``zdotc`` with a stride, OpenBLAS 0.3.21 of Debian 12) reads past the array's
+        end, which kills the process where the array ends at an unmapped page (the
+        last column of a 1024^2 coarse grid's ``rfft2``).
         """
         dot = 2.0 * np.vdot(a, b).real
         for c in self.own_mirror:
-            dot -= np.vdot(a[:, c], b[:, c]).real
+            dot -= np.vdot(np.ascontiguousarray(a[:, c]), np.ascontiguousarray(b[:, c])).real
         return float(dot)
 
     def _solve(self, springs, b):

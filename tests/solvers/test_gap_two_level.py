@@ -13,9 +13,13 @@
 * a two-level adhesive solve reaches the state of the default solver to the
   tolerance's reach, and the same state on 1 rank and on ``comm``;
 * the springs on the contact set sum to the contact's stiffness ``1_C . K 1_C``;
-* the coarse cell is 16 pixels a side at every grid up to 16384^2.
+* the coarse cell is 16 pixels a side at every grid up to 16384^2, and the coarse
+  solve's inner products survive a coarse grid that large.
 """
 import math
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
@@ -31,6 +35,8 @@ from petgap.solvers.gap_two_level import (INNER_TOLERANCE, CoarseTerm, block_for
                                           coarse_compliance)
 from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
+
+from conftest import clean_env, wait_for_root
 
 E_STAR = 2.5
 
@@ -223,3 +229,37 @@ def test_coarse_cells_are_16_pixels_up_to_16384(shape, block):
     Why not larger cells at 8192^2 and 16384^2: the sticky side's iterations grow with the
     cell (docs/design.md, the two-level preconditioner)."""
     assert block_for(shape) == block
+
+
+def test_inner_products_of_a_large_coarse_grid(tmp_path):
+    """Parseval's inner product on a 1024^2 coarse grid's ``rfft2`` (16384^2 at 16-pixel
+    cells) equals the real fields' product, with each field ending exactly at the end of
+    a mapping of its own: a strided BLAS product of the last column read past the array
+    and killed the process (run in a process of its own, so that a crash fails here)."""
+    script = tmp_path / "dot.py"
+    script.write_text(textwrap.dedent("""
+        import mmap, types
+        import numpy as np
+        from petgap.solvers.gap_two_level import CoarseTerm
+
+        def at_mapping_end(values):
+            nbytes = values.nbytes
+            size = -(-nbytes // mmap.PAGESIZE) * mmap.PAGESIZE
+            out = np.frombuffer(mmap.mmap(-1, size), dtype=values.dtype, count=values.size,
+                                offset=size - nbytes).reshape(values.shape)
+            out[...] = values
+            return out
+
+        rng = np.random.default_rng(0)
+        for n in (1024, 512, 1022):
+            x, y = rng.random((n, n)), rng.random((n, n))
+            a, b = at_mapping_end(np.fft.rfft2(x)), at_mapping_end(np.fft.rfft2(y))
+            term = types.SimpleNamespace(own_mirror=(0, -1) if n % 2 == 0 else (0,))
+            dot = CoarseTerm._dot(term, a, b) / (n * n)
+            assert abs(dot - float(np.sum(x * y))) <= 1e-10 * float(np.sum(x * y)), n
+        print("ok")
+        """))
+    done = wait_for_root(lambda: subprocess.run([sys.executable, str(script)],
+                                                capture_output=True, text=True, timeout=300,
+                                                env=clean_env()))
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-2000:]
