@@ -1050,17 +1050,14 @@ cdef class PaddedConvolutionPlans:
             which = 0 if m == self.nrows[0] else 1
             if not self.packed and rs == nyl:
                 memcpy(self.block, self.rows_data + i0 * nyl, m * nyl * sizeof(fftw_complex))
-            elif not self.packed:
-                for r in range(m):
-                    memcpy(<fftw_complex *>self.block + r * nyc, self.rows_data + (i0 + r) * rs,
-                           nyl * sizeof(fftw_complex))
             else:
-                for r in range(m):   # unpack the Nyquist value from the imaginary part of ky = 0
+                for r in range(m):
                     c = <fftw_complex *>self.block + r * nyc
                     memcpy(c, self.rows_data + (i0 + r) * rs, nyl * sizeof(fftw_complex))
-                    (<real_t *>(c + nyc - 1))[0] = (<real_t *>c)[1]
-                    (<real_t *>(c + nyc - 1))[1] = 0
-                    (<real_t *>c)[1] = 0
+                    if self.packed:   # the Nyquist value from the imaginary part of ky = 0
+                        (<real_t *>(c + nyc - 1))[0] = (<real_t *>c)[1]
+                        (<real_t *>(c + nyc - 1))[1] = 0
+                        (<real_t *>c)[1] = 0
             fftw_execute(self.rows_bwd[which])
             if gathered == NULL:
                 for r in range(m):

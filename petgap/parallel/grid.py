@@ -339,12 +339,11 @@ class Grid:
         precision = self.precision if precision is None else precision
         binding = BINDINGS[precision]
         cx, cy = (2 * self.nx, 2 * self.ny) if cell is None else cell
-        alloc, ln0, l0s, ln1, l1s = _fftw_mpi.local_size_lines(
-            self.comm, self.nx, _fftw_mpi.padded_line_count(cy))
+        lines_count = _fftw_mpi.padded_line_count(cy)
+        alloc, ln0, l0s, ln1, l1s = _fftw_mpi.local_size_lines(self.comm, self.nx, lines_count)
         if (ln0, l0s) != (self.local_shape[0], self.x_slice.start):
             raise DecompositionError(f"the padded rows of a {self.nx} x {self.ny} map are split "
                                      f"unlike the map's ({ln0} from {l0s} here)")
-        lines_count = _fftw_mpi.padded_line_count(cy)
         side = max(self.nx, lines_count)
         if square is None:   # the rule in this method's docstring
             room = alloc * SQUARE_GROWTH if buffers is None else min(b.size for b in buffers)

@@ -61,9 +61,10 @@ def sweep(problem, steps, *, initial=None, before=None, **solve_options):
     ``state``, that state), in the order of ``steps``, so the caller can store
     it before the next step starts.  Besides the step being solved, the sweep
     holds the state of each chain that has steps to come (their warm start) and
-    the scalars of every step (what a later control may ask): a caller that lets go of each yielded state before
-    asking for the next keeps a series of chains (the works of adhesion of the
-    paper's protocol) at the memory of one solve and one warm start.  Each state gets
+    the scalars of every step (what a later control may ask): a caller that lets
+    go of each yielded state before asking for the next keeps a series of chains
+    (the works of adhesion of the paper's protocol) at the memory of one solve and
+    one warm start.  Each state gets
 
     * ``direction``: ``"loading"`` when the control pushes the surfaces together
       (larger load, deeper indentation, smaller mean gap) relative to the previous step,
