@@ -63,8 +63,8 @@ of the contact, which no fixed guess of it has (:mod:`petgap.solvers.gap_cg`).
 Cost per iteration: the free set's springs and ``R r`` ride on the pass that
 writes the residual; one pass subtracts the prolongation; a transform pair of the
 coarse grid per coarse iteration (the coarse conjugate gradients run on the
-fields' ``rfft2``, where ``H`` is a multiplier; SciPy's, twice as fast as NumPy's on a
-1024^2 coarse grid), and no transform of the fine grid
+fields' ``rfft2``, where ``H`` is a multiplier; :func:`coarse_transforms` picks the
+library), and no transform of the fine grid
 but the contact's springs.  Those are ``R (1_C K 1_C)`` itself, one transform pair
 of the fine grid, formed again only once the contact has moved by more than
 :data:`RESPRING` of its points (counted per coarse cell in the residual's pass):
@@ -100,6 +100,26 @@ RESPRING = 0.002
 #: Aliases of the hats' spectrum summed a side for the coarse compliance (their
 #: weight falls like the fourth power of the alias' order).
 ALIASES = 4
+#: From this many coarse nodes a side the coarse system is transformed by SciPy, below it
+#: by NumPy (:func:`coarse_transforms`).
+SCIPY_SIDE = 512
+
+
+def coarse_transforms(shape):
+    """The module whose ``rfft2`` / ``irfft2`` transform a coarse grid of ``shape``.
+
+    Why two: on large coarse grids SciPy's transforms are markedly faster than
+    NumPy's, and the coarse system costs some sixty pairs per fine iteration;
+    on small ones the two are about as fast, and importing ``scipy.fft`` in a
+    process that has not would cost a small solve more time and memory than the
+    transforms save.  Both are pocketfft: the results agree to round-off.
+    Depends on the shape only, never on the ranks.
+    """
+    if max(shape) >= SCIPY_SIDE:
+        # deferred: importing SciPy changes warning filters, which `import petgap` must not do
+        from scipy import fft
+        return fft
+    return np.fft
 
 
 def block_for(shape):
@@ -163,6 +183,7 @@ class CoarseTerm:
         self.grid, self.block = grid, block
         self.x0 = grid.x_slice.start
         self.coarse_shape = (grid.shape[0] // block, grid.shape[1] // block)
+        self.transforms = coarse_transforms(self.coarse_shape)
         self.symbol = coarse_compliance(grid.shape, (grid.Lx, grid.Ly), block, contact_modulus)
         self.symbol[0, 0] = mean_compliance
         self.root_symbol = np.sqrt(self.symbol)   # H = Fc^{1/2}
@@ -229,8 +250,7 @@ class CoarseTerm:
         there and ``W`` one in real space, so an iteration costs one transform pair
         of the coarse grid, and inner products are Parseval's over the half plane.
         """
-        # deferred: importing SciPy changes warning filters, which `import petgap` must not do
-        from scipy import fft
+        fft = self.transforms
         x = np.zeros_like(b)
         res, norm = b.copy(), float(np.sqrt(self._dot(b, b)))
         if norm == 0.0:
@@ -255,8 +275,7 @@ class CoarseTerm:
 
     def correct(self, padded):
         """Subtract ``P (Fc R r - H v)`` from ``K^{-1} r`` in the FFT buffer (module docstring)."""
-        # deferred: importing SciPy changes warning filters, which `import petgap` must not do
-        from scipy import fft
+        fft = self.transforms
         rhs = fft.rfft2(self.rhs)
         hr = self.root_symbol * rhs
         v = self._solve(self.springs, hr)

@@ -31,8 +31,8 @@ from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.grid import Grid
 from petgap.solvers import _kernels as _k
 from petgap.solvers.gap_cg import gap_cg
-from petgap.solvers.gap_two_level import (INNER_TOLERANCE, CoarseTerm, block_for,
-                                          coarse_compliance)
+from petgap.solvers.gap_two_level import (INNER_TOLERANCE, SCIPY_SIDE, CoarseTerm, block_for,
+                                          coarse_compliance, coarse_transforms)
 from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
 
@@ -112,13 +112,17 @@ def test_coarse_term_stays_below_the_compliance(b):
     assert largest < 1.0
 
 
+@pytest.mark.parametrize("library", ["numpy", "scipy"])
 @pytest.mark.parametrize("shape", [(128, 96), (80, 112)])
-def test_coarse_system_is_solved_on_its_spectrum(shape):
+def test_coarse_system_is_solved_on_its_spectrum(shape, library):
     """``(I + H W H) v = b`` by the coarse term's conjugate gradients on ``rfft2`` fields,
     against a dense solve; ``_dot`` is the real-space inner product (coarse sides
-    8 x 6 and 5 x 7: with and without a Nyquist column)."""
+    8 x 6 and 5 x 7: with and without a Nyquist column), by either library's transforms
+    (:func:`coarse_transforms` gives SciPy's to large coarse grids only)."""
     term = CoarseTerm(Grid(shape, size=(1.0, 0.75), comm=MPI.COMM_SELF, planner="estimate"),
                       E_STAR, 16)
+    if library == "scipy":
+        term.transforms = pytest.importorskip("scipy.fft")
     cs = term.coarse_shape
     rng = np.random.default_rng(3)
     a, b = rng.standard_normal(cs), rng.standard_normal(cs)
@@ -229,6 +233,36 @@ def test_coarse_cells_are_16_pixels_up_to_16384(shape, block):
     Why not larger cells at 8192^2 and 16384^2: the sticky side's iterations grow with the
     cell (docs/design.md, the two-level preconditioner)."""
     assert block_for(shape) == block
+
+
+def test_small_coarse_grids_are_transformed_without_scipy(tmp_path):
+    """Below :data:`SCIPY_SIDE` nodes a side the coarse system runs on NumPy's transforms,
+    and a solve there does not import ``scipy.fft`` (its import costs a small solve more
+    time and memory than its transforms save); from that side on, SciPy's.  The second half
+    in a fresh process, where nothing else has imported SciPy."""
+    import scipy.fft
+    assert coarse_transforms((SCIPY_SIDE // 2, SCIPY_SIDE // 2)) is np.fft
+    assert coarse_transforms((SCIPY_SIDE, SCIPY_SIDE // 2)) is scipy.fft
+    script = tmp_path / "small.py"
+    script.write_text(textwrap.dedent("""
+        import sys
+        import numpy as np
+        from mpi4py import MPI
+        from petgap.parallel.grid import Grid
+        from petgap.solvers.gap_two_level import CoarseTerm
+        term = CoarseTerm(Grid((128, 128), comm=MPI.COMM_SELF, planner="estimate"), 1.0, 16)
+        term.rhs = np.random.default_rng(0).random(term.coarse_shape)
+        term.springs = np.ones(term.coarse_shape)
+        padded = np.zeros((128, 130))
+        term.correct(padded)
+        assert term.inner_iterations > 0 and np.abs(padded).max() > 0
+        print("scipy.fft" in sys.modules)
+        """))
+    done = wait_for_root(lambda: subprocess.run([sys.executable, str(script)],
+                                                capture_output=True, text=True, timeout=300,
+                                                env=clean_env()))
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "False"
 
 
 def test_inner_products_of_a_large_coarse_grid(tmp_path):
