@@ -16,9 +16,12 @@ wall time) and iterations over the periodic one's, and the peak memory per map p
 grid, summed over ranks; each boundary solved in a process of its own).
 
 ``--shape NXxNY`` and ``--pixel DXxDY`` solve one non-square map with non-unit pixels
-instead of the square sizes (no floor then).  ``--controls`` adds, on the free map,
-indentation to the load solve's depth and mean-gap control to its mean gap, with their
-iterations and times (in the free solve's process, after its memory is taken).
+instead of the square sizes (no floor then).  ``--controls`` adds mean-gap control to the
+load solve's mean gap on both boundaries, and on the free map indentation to its depth,
+with their iterations and times (in each boundary's process, after its memory is taken);
+a free control's ratios are over the periodic solve of the same state: the cell's
+mean-gap solve, and for indentation (which a periodic cell does not have: an approach
+fixes no load there) its load solve.
 
 With ``--tamaas`` the free map is also solved by Tamaas 2.9's ``PolonskyKeerRey`` with its
 non-periodic ``dcfft`` operator (one process, in its own venv as in benchmarks/contact.py),
@@ -105,11 +108,16 @@ def worker(shape, size, path, boundary, controls, save=False):
         pairs = [_timed(comm, lambda: body.displacement(field, out)) for _ in range(6)]
         result["pair"] = float(np.median([wall for _, wall, _ in pairs[1:]]))
         result["pair_cpu"] = float(np.median([cpu for _, _, cpu in pairs[1:]]))
-    if boundary == "free" and controls:
-        u = body.displacement(s.pressure)
-        depth = problem.top_height - grid.sum(s.gap + h - u) / grid.npoints
-        for name, control in (("indentation", petgap.Indentation(depth)),
-                              ("mean-gap", petgap.MeanGap(s.mean_gap))):
+    if controls:
+        # each control at the load solve's own state: the mean gap it found, and on the
+        # free map the depth too (a periodic cell has no indentation: an approach fixes
+        # no load there)
+        steps = [("mean-gap", petgap.MeanGap(s.mean_gap))]
+        if boundary == "free":
+            u = body.displacement(s.pressure)
+            depth = problem.top_height - grid.sum(s.gap + h - u) / grid.npoints
+            steps.insert(0, ("indentation", petgap.Indentation(depth)))
+        for name, control in steps:
             c, t, cpu = _timed(comm, lambda: petgap.solve(problem, control, tolerance=TOLERANCE))
             result[name] = {"iterations": c.iterations, "time": t, "cpu": cpu,
                             "converged": c.converged, "load": c.mean_pressure}
@@ -197,7 +205,7 @@ def main():
             small = fft_floor(shape[0], ranks) if square else None
             # beyond 8192^2 FFTW's measuring planner takes longer than the solves
             large = fft_floor(2 * shape[0], ranks) if square and shape[0] <= 4096 else None
-            periodic = _run(ranks, shape, size, path, "periodic", False, env)
+            periodic = _run(ranks, shape, size, path, "periodic", args.controls, env)
             free = _run(ranks, shape, size, path, "free", args.controls, env,
                         save=args.tamaas and ranks == 1)
             for boundary, r in (("periodic", periodic), ("free", free)):
@@ -219,14 +227,22 @@ def main():
                     "-" if pair is None or small is None else f"{pair / small:.2f}",
                     *ratios, f"{r['bytes']:.0f}", f"{r['c']:.4f}")), flush=True)
                 for control in ("indentation", "mean-gap"):
-                    if control in r:
-                        c = r[control]
-                        print(f"{name} | {ranks} | free, {control} | {c['iterations']} | - | "
-                              f"{c['time']:.3f} | {c['cpu']:.3f} | "
-                              f"{1e3 * c['time'] / max(c['iterations'], 1):.1f} | - | - | - | - | "
-                              f"{c['time'] / r['time']:.2f} (of free load) | "
-                              f"{c['cpu'] / r['cpu']:.2f} | {c['iterations'] / r['iterations']:.2f}"
-                              f" | - | P0 {c['load']:.6f}", flush=True)
+                    if control not in r:
+                        continue
+                    c = r[control]
+                    # the free control over the periodic solve of the same state: the same
+                    # control where the cell has it, else (indentation) its load solve
+                    base = None
+                    if boundary == "free" and periodic is not None:
+                        base = periodic.get(control, periodic)
+                    ratios = "- | - | -"
+                    if base is not None:
+                        ratios = (f"{c['time'] / base['time']:.2f} | {c['cpu'] / base['cpu']:.2f}"
+                                  f" | {c['iterations'] / base['iterations']:.2f}")
+                    print(f"{name} | {ranks} | {boundary}, {control} | {c['iterations']} | - | "
+                          f"{c['time']:.3f} | {c['cpu']:.3f} | "
+                          f"{1e3 * c['time'] / max(c['iterations'], 1):.1f} | - | - | - | - | "
+                          f"{ratios} | - | P0 {c['load']:.6f}", flush=True)
         if args.tamaas and shape[0] == shape[1]:
             from contact import tamaas_python
             proc = subprocess.run([str(tamaas_python()), "-c", TAMAAS_DCFFT, str(path), str(LOAD),
