@@ -19,7 +19,7 @@ grid, summed over ranks; each boundary solved in a process of its own).
 instead of the square sizes (no floor then).  ``--controls`` adds mean-gap control to the
 load solve's mean gap on both boundaries, and on the free map indentation to its depth,
 with their iterations and times (in each boundary's process, after its memory is taken);
-a free control's ratios are over the periodic solve of the same state: the cell's
+a free control's ratios are over the periodic solve of the same control: the cell's
 mean-gap solve, and for indentation (which a periodic cell does not have: an approach
 fixes no load there) its load solve.
 
@@ -230,8 +230,8 @@ def main():
                     if control not in r:
                         continue
                     c = r[control]
-                    # the free control over the periodic solve of the same state: the same
-                    # control where the cell has it, else (indentation) its load solve
+                    # the free control over the periodic solve of the same control where
+                    # the cell has it, else (indentation) over its load solve
                     base = None
                     if boundary == "free" and periodic is not None:
                         base = periodic.get(control, periodic)

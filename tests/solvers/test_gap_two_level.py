@@ -235,6 +235,16 @@ def test_coarse_cells_are_16_pixels_up_to_16384(shape, block):
     assert block_for(shape) == block
 
 
+def _in_fresh_process(tmp_path, source):
+    """Run ``source`` (dedented) as a script in a Python process of its own, from rank 0
+    (:func:`conftest.wait_for_root`), so that a crash or an import fails the test only."""
+    script = tmp_path / "script.py"
+    script.write_text(textwrap.dedent(source))
+    return wait_for_root(lambda: subprocess.run([sys.executable, str(script)],
+                                                capture_output=True, text=True, timeout=300,
+                                                env=clean_env()))
+
+
 def test_small_coarse_grids_are_transformed_without_scipy(tmp_path):
     """Below :data:`SCIPY_SIDE` nodes a side the coarse system runs on NumPy's transforms,
     and a solve there does not import ``scipy.fft`` (its import costs a small solve more
@@ -243,8 +253,7 @@ def test_small_coarse_grids_are_transformed_without_scipy(tmp_path):
     import scipy.fft
     assert coarse_transforms((SCIPY_SIDE // 2, SCIPY_SIDE // 2)) is np.fft
     assert coarse_transforms((SCIPY_SIDE, SCIPY_SIDE // 2)) is scipy.fft
-    script = tmp_path / "small.py"
-    script.write_text(textwrap.dedent("""
+    done = _in_fresh_process(tmp_path, """
         import sys
         import numpy as np
         from mpi4py import MPI
@@ -257,10 +266,7 @@ def test_small_coarse_grids_are_transformed_without_scipy(tmp_path):
         term.correct(padded)
         assert term.inner_iterations > 0 and np.abs(padded).max() > 0
         print("scipy.fft" in sys.modules)
-        """))
-    done = wait_for_root(lambda: subprocess.run([sys.executable, str(script)],
-                                                capture_output=True, text=True, timeout=300,
-                                                env=clean_env()))
+        """)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip() == "False"
 
@@ -270,8 +276,7 @@ def test_inner_products_of_a_large_coarse_grid(tmp_path):
     cells) equals the real fields' product, with each field ending exactly at the end of
     a mapping of its own: a strided BLAS product of the last column read past the array
     and killed the process (run in a process of its own, so that a crash fails here)."""
-    script = tmp_path / "dot.py"
-    script.write_text(textwrap.dedent("""
+    done = _in_fresh_process(tmp_path, """
         import mmap, types
         import numpy as np
         from petgap.solvers.gap_two_level import CoarseTerm
@@ -292,8 +297,5 @@ def test_inner_products_of_a_large_coarse_grid(tmp_path):
             dot = CoarseTerm._dot(term, a, b) / (n * n)
             assert abs(dot - float(np.sum(x * y))) <= 1e-10 * float(np.sum(x * y)), n
         print("ok")
-        """))
-    done = wait_for_root(lambda: subprocess.run([sys.executable, str(script)],
-                                                capture_output=True, text=True, timeout=300,
-                                                env=clean_env()))
+        """)
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-2000:]
