@@ -22,9 +22,6 @@ from petgap.solvers.settings import SolverSettings
 #: then read to about its error, and a secant step through two such reads removes most
 #: of it (a move restarts the iteration, so fewer, surer moves are what is wanted).
 FORCING = 1.0
-#: A move scales the pressure by at most this factor or its inverse (the iteration
-#: finds the rest): the prediction is linear in the move and fails for large ones.
-LARGEST_SCALE = 2.0
 
 
 class DepthForMeanGap:
@@ -41,30 +38,29 @@ class DepthForMeanGap:
     * How far: a secant step of ``m`` against the offset, its slope (between 0,
       rigid-plastic, and 1, rigid) measured between moves, before the second
       ``slope`` (the coarse grid's, where there is one).
-    * How: the pressure is scaled with the move.  ``mean(u)`` is proportional to the
-      load, so ``dm / d offset = 1 + mean(u) d log P / d offset`` gives the load's
-      response, ``d log P = -(1 - slope) d offset / mean(u)``, from the slope alone;
-      the contact set and the pressure's shape are kept.  Each move restarts the
-      conjugate gradients and costs an iteration (one transform pair).
+    * How: the pressure moves with the depth along the shape of a flat punch on the
+      contact set, which keeps the gap there near zero
+      (:meth:`~petgap.solvers.pressure_cg.PressureCG.move_depth`).  Each move
+      restarts the conjugate gradients and costs an iteration (two transform pairs,
+      three at the first).
 
     ``log``: a line per move (:func:`~petgap.solvers.progress.outer_step`).  Collective.
     """
 
     def __init__(self, problem, target, tolerance, slope=1.0, bound=None, log=True):
         self.target, self.tolerance, self.slope = target, tolerance, slope
-        self.gap_scale, self.mean_height = problem.gap_scale, problem.mean_height
+        self.gap_scale = problem.gap_scale
         self.top = problem.top_height
         self.last, self.moves, self.error = None, 0, None
         self.bound, self.timer = bound, (Timer() if log else None)
 
     def __call__(self, cg, residual):
-        """``(offset, scale)`` of the move, or None to hold the depth.
+        """The offset of ``g = u - h + offset`` to move to, or None to hold the depth.
 
         At a residual within the tolerance the error is the stored state's (the gap
         projected onto the contact state), so that the mean gap a converged solve
         reports is within the tolerance; before, the iterate's own."""
         mean = cg.mean_gap(projected=residual <= self.tolerance)
-        mean_u = mean + self.mean_height - cg.offset
         self.error = (mean - self.target) / self.gap_scale
         error = abs(self.error)
         if error <= self.tolerance or residual > max(self.tolerance, FORCING * error):
@@ -76,16 +72,12 @@ class DepthForMeanGap:
         offset = cg.offset + (self.target - mean) / self.slope
         if offset >= self.top:   # past first touch: halve the depth instead
             offset = 0.5 * (cg.offset + self.top)
-        scale = 1.0
-        if mean_u > 0:
-            scale = 1.0 - (1.0 - self.slope) * (offset - cg.offset) / mean_u
-            scale = min(max(scale, 1.0 / LARGEST_SCALE), LARGEST_SCALE)
         self.moves += 1
         if self.timer is not None:
             outer_step("the mean gap by the indentation depth", self.moves, self.bound,
                        self.timer, f"mean gap off by {error:.3e} h0 (target "
                        f"{self.tolerance:.0e}) at KKT residual {residual:.1e}: depth moved")
-        return offset, scale
+        return offset
 
 
 def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *,
@@ -141,7 +133,11 @@ def _coarse_depth(problem, control, settings, depth):
     """``(depth, slope, pressure, description)`` from the same mean gap on the coarse grid.
 
     The coarse problem is solved by this module to the coarse tolerance (from its
-    own coarse grid), and its pressure prolonged to the fine grid's scratch.  Where
+    own coarse grid), and its pressure prolonged to the fine grid's scratch.  What
+    carries over is the rigid surface's place against the mean height, which the
+    block means keep, not its depth below the highest point, which they lower:
+    the fine depth is the coarse one plus the difference of the two highest points
+    (``offset = max(h) - depth`` is the same on both grids).  Where
     there is no coarse grid, or the coarse solve failed, the rigid estimate
     ``depth`` with slope 1 and no pressure.  Collective.
     """
@@ -161,4 +157,5 @@ def _coarse_depth(problem, control, settings, depth):
     factor = problem.grid.nx // cgrid.nx
     pressure = coarse.prolong(cgrid.x_slice.start, problem.grid, solution.pressure, factor,
                               coarse.is_whole(problem.grid, cgrid))
-    return solution.depth, solution.depth_slope, pressure, description
+    depth = solution.depth + problem.top_height - coarse_problem.top_height
+    return depth, solution.depth_slope, pressure, description

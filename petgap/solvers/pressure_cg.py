@@ -158,11 +158,11 @@ def polonsky_keer(problem, control, settings=SolverSettings(), *, initial_pressu
         ``monitor(iteration, residual)`` on every rank at every iteration.
     retarget : callable, optional
         Under indentation, ``retarget(cg, residual)`` on every iteration that would
-        carry on or stop converged: None to hold the depth, or ``(offset, scale)``, a
-        new offset of ``g = u - h + offset`` and a factor for the pressure, which
-        restarts the iteration from there (a move costs an iteration; the solve
-        converges only on an iteration the rule holds).  Collective: the rule must
-        answer alike on every rank (:class:`petgap.solvers.indentation.DepthForMeanGap`).
+        carry on or stop converged: None to hold the depth, or a new offset of
+        ``g = u - h + offset``, to which :meth:`PressureCG.move_depth` moves the
+        iterate (a move costs an iteration; the solve converges only on an
+        iteration the rule holds).  Collective: the rule must answer alike on every
+        rank (:class:`petgap.solvers.indentation.DepthForMeanGap`).
 
     Returns
     -------
@@ -230,6 +230,7 @@ class PressureCG:
         self.converged, self.reason, self.it = False, "max_iterations", 0
         self.best, self.best_it = np.inf, 0
         self.retarget = retarget   # polonsky_keer's, or None
+        self.punch_scale = None    # move_depth's, found at the first move
         self._u = None
 
     @property
@@ -268,10 +269,9 @@ class PressureCG:
                 self.fresh, self.scale = True, 1.0
                 continue
             if verdict in ("", "converged_kkt") and self.retarget is not None:
-                moved = self.retarget(self, residual)
-                if moved is not None:
-                    self.offset, self.scale = moved
-                    self.delta, self.fresh = 0.0, True
+                offset = self.retarget(self, residual)
+                if offset is not None:
+                    self.move_depth(offset)
                     continue
             if verdict:
                 self.converged, self.reason = verdict == "converged_kkt", verdict
@@ -287,6 +287,43 @@ class PressureCG:
             if not self._step(n_contact, g_norm, residual):
                 self.reason = "breakdown"
                 return
+
+    def move_depth(self, offset):
+        """Move the offset of ``g = u - h + offset`` to ``offset``, and the pressure with it.
+
+        On a fixed contact set ``S`` an indentation's pressure is affine in the
+        depth, with the flat punch on ``S``, ``y = C_SS^{-1} 1_S`` (``C = K^{-1}``), for
+        derivative: moved along ``y``, the pressure keeps the gap on ``S`` at zero and
+        the iteration keeps its residual.  ``y`` costs a solve; the stiffness
+        restricted to ``S``, ``P_S K 1_S``, has its shape (large at the patches'
+        edges, small inside them, as a punch's pressure is) for one transform pair,
+        and is used in its place, scaled so that its displacement has unit mean on
+        ``S`` (one more pair, at the first move only: the scale barely moves with the
+        set).  A pressure scaled with the move instead, whose displacement on ``S``
+        is the topography's and far from uniform, leaves a residual several times
+        the one the move started from.  A point the move pulls to zero pressure
+        leaves ``S``.  The conjugate gradients restart from a fresh ``u``.  Collective.
+        """
+        contact = self.contact
+        shape = contact.z   # scratch until the next preconditioned gap
+        self.transforms.stiffness(contact.pidx, np.ones(len(contact.idx), dtype=self.dtype),
+                                  shape)
+        if self.punch_scale is None:
+            image = np.empty(len(shape), dtype=self.dtype)
+            self.problem.half_space.apply_sparse(contact.pidx, shape, inverse=True,
+                                                 gathered=image)
+            n_contact, total = global_sums(self.comm, len(shape),
+                                           float(image.sum(dtype=np.float64)))
+            if n_contact > 0 and total > 0:
+                self.punch_scale = n_contact / total
+        if self.punch_scale is not None:
+            shape *= (self.offset - offset) * self.punch_scale
+            contact.p[...] += shape
+            if (contact.p <= 0).any():
+                np.maximum(contact.p, 0, out=contact.p)
+                contact.merge(np.empty(0, dtype=INDEX), np.empty(0, dtype=self.dtype))
+        self.offset = offset
+        self.delta, self.fresh = 0.0, True
 
     def _transform_u(self):
         """``u = K^{-1} p`` from scratch: one transform pair, from ``S`` to ``u``."""

@@ -403,3 +403,53 @@ def test_free_mean_gap_costs_less_than_two_load_solves(comm):
     assert s.mean_pressure == pytest.approx(by_load.mean_pressure, rel=1e-6)
     assert s.operator_applications <= 1.85 * by_load.operator_applications, \
         (s.operator_applications, by_load.operator_applications)
+
+
+@pytest.mark.parametrize("move", [1e-3, -1e-3])
+def test_a_depth_move_takes_the_pressure_with_it(comm, move):
+    """``PressureCG.move_depth`` moves the pressure along a flat punch's shape on the contact
+    set, so a converged indentation moved by ``delta`` keeps the gap there well below
+    ``delta`` (a bare move of the depth leaves ``delta`` on every contact point), and the
+    solve ends at the new depth."""
+    from petgap.mechanics.problem import Indentation
+    from petgap.solvers.pressure_cg import polonsky_keer
+    from petgap.solvers.settings import SolverSettings
+    grid = Grid((128, 128), comm=comm, planner="estimate", wisdom=False)
+    h = petgap.self_affine(grid, 0.8, 8.0, grid.Lx / 2, rms_slope=0.1, seed=3)
+    problem = petgap.ContactProblem(grid, h, FreeHalfSpace(grid))
+    depth = petgap.solve(problem, petgap.Load(0.002), tolerance=1e-10).approach
+    delta = move * problem.gap_scale
+    seen = []
+
+    def rule(cg, residual):
+        if not seen and residual < 1e-9:
+            seen.append(cg.offset)
+            return cg.offset + delta
+        if len(seen) == 1:
+            seen.append(residual)   # the first residual after the move
+        return None
+
+    s = polonsky_keer(problem, Indentation(depth), SolverSettings(tolerance=1e-10),
+                      retarget=rule)
+    assert s.converged and len(seen) == 2
+    assert 0 < seen[1] < 0.6 * abs(move), seen[1] / abs(move)
+    assert s.approach == pytest.approx(depth - delta, rel=0, abs=1e-12 * depth)
+
+
+def test_the_coarse_start_carries_the_rigid_surface_not_its_depth(comm):
+    """A free mean-gap solve starts from the coarse grid's answer.  Block means lower the
+    highest point (here a sphere's apex, by 0.01), so the depth below it differs between
+    the grids where the rigid surface's place against the mean height does not: carried
+    over as that place, the start's depth is nearer the answer than the coarse depth."""
+    from petgap.solvers import coarse
+    from petgap.solvers.indentation import _coarse_depth, solve_mean_gap_by_indentation
+    from petgap.solvers.settings import SolverSettings
+    grid = Grid((128, 128), comm=comm, planner="estimate", wisdom=False)
+    problem = petgap.ContactProblem(grid, indenter(grid, "paraboloid", 50.0), FreeHalfSpace(grid))
+    depth = 0.5
+    control = petgap.MeanGap(petgap.solve(problem, petgap.Indentation(depth)).mean_gap)
+    settings = SolverSettings()
+    start = _coarse_depth(problem, control, settings, 0.0)[0]
+    on_coarse = solve_mean_gap_by_indentation(coarse.coarse_problem(problem), control,
+                                              settings.but(tolerance=settings.coarse_tolerance))
+    assert abs(start - depth) < 0.5 * abs(on_coarse.depth - depth), (start, on_coarse.depth)
