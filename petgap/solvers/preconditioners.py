@@ -174,6 +174,11 @@ class PatchAdmission:
         """Record how much of ``S`` (``n_contact`` points) the last step changed."""
         self.settled = n_changed <= self.admit * n_contact
 
+    def moved(self):
+        """The problem moved under the iteration (a depth move): the residual's next rise
+        is the move's, not a step's with the term, so it withdraws nothing."""
+        self.used = False
+
     def withdraws(self, iteration, residual):
         """Whether ``residual`` rose past what the last step with the term allowed.
 
@@ -216,6 +221,9 @@ class Identity:
 
     def withdraws(self, iteration, residual):
         return False
+
+    def moved(self):
+        pass
 
     def observe_step(self, n_changed, n_contact):
         pass
@@ -263,6 +271,9 @@ class RestrictedStiffness:
 
     def withdraws(self, iteration, residual):
         return self.admission.withdraws(iteration, residual)
+
+    def moved(self):
+        self.admission.moved()
 
     def observe_step(self, n_changed, n_contact):
         self.admission.observe_step(n_changed, n_contact)

@@ -302,7 +302,10 @@ class PressureCG:
         set).  A pressure scaled with the move instead, whose displacement on ``S``
         is the topography's and far from uniform, leaves a residual several times
         the one the move started from.  A point the move pulls to zero pressure
-        leaves ``S``.  The conjugate gradients restart from a fresh ``u``.  Collective.
+        leaves ``S``.  The conjugate gradients restart from a fresh ``u``, and the
+        residual's rise the move leaves does not withdraw the patch interaction from
+        the preconditioner (:meth:`~petgap.solvers.preconditioners.PatchAdmission.moved`).
+        Collective.
         """
         contact = self.contact
         shape = contact.z   # scratch until the next preconditioned gap
@@ -324,6 +327,7 @@ class PressureCG:
                 contact.merge(np.empty(0, dtype=INDEX), np.empty(0, dtype=self.dtype))
         self.offset = offset
         self.delta, self.fresh = 0.0, True
+        self.preconditioner.moved()
 
     def _transform_u(self):
         """``u = K^{-1} p`` from scratch: one transform pair, from ``S`` to ``u``."""

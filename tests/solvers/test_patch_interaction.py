@@ -262,6 +262,21 @@ def test_a_step_after_which_the_residual_rose_withdraws_the_interaction(comm, mo
     assert_same_state(problem.grid, local, withdrawn, *tolerance_scales(problem, 1e-9))
 
 
+def test_a_rise_after_a_depth_move_withdraws_nothing():
+    """A residual that rose after a step with the term withdraws it; one that rose after a
+    move of the depth (``moved``) is the move's, and leaves the term and its admission."""
+    admission = preconditioners.PatchAdmission(None)
+    admission.used, admission.used_from = True, 1e-4
+    assert admission.withdraws(5, 2e-4)
+    assert admission.admit == pytest.approx(preconditioners.SETTLED_FRACTION
+                                            * preconditioners.WITHDRAWN_FACTOR)
+    admission = preconditioners.PatchAdmission(None)
+    admission.used, admission.used_from = True, 1e-4
+    admission.moved()
+    assert not admission.withdraws(5, 2e-4)
+    assert admission.admit == preconditioners.SETTLED_FRACTION
+
+
 def test_larger_blocks_wait_for_a_more_settled_set(monkeypatch):
     """The admitted fraction scales with 32-pixel blocks' area over the blocks' own, grown
     blocks (beyond MAX_SIDE a side) included, and is never more than SETTLED_FRACTION."""
