@@ -320,10 +320,10 @@ class PressureCG:
             if n_contact > 0 and total > 0:
                 self.punch_scale = n_contact / total
         if self.punch_scale is not None:
-            shape *= (self.offset - offset) * self.punch_scale
-            contact.p[...] += shape
-            if (contact.p <= 0).any():
-                np.maximum(contact.p, 0, out=contact.p)
+            # the step's own kernel: p <- max(p - tau shape, 0), no pressure to overlaps
+            clipped = _cs.update(contact.p, shape, contact.g,
+                                 (offset - self.offset) * self.punch_scale, 0.0)[1]
+            if clipped:
                 contact.merge(np.empty(0, dtype=INDEX), np.empty(0, dtype=self.dtype))
         self.offset = offset
         self.delta, self.fresh = 0.0, True
