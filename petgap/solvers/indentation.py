@@ -22,6 +22,38 @@ from petgap.solvers.settings import SolverSettings
 #: then read to about its error, and a secant step through two such reads removes most
 #: of it (a move restarts the iteration, so fewer, surer moves are what is wanted).
 FORCING = 1.0
+#: A read of an iterate's mean gap lies within about this many times the iterate's KKT
+#: residual (both over ``h0``) of the converged mean gap at its depth (0.004-0.1 on the
+#: benchmarks' rough maps, the most in the first iterations of a start), so a secant
+#: between two reads is trusted to this times their residuals over the change of ``m``.
+READ_ERROR = 0.1
+#: The coarse levels of a cold mean-gap solve are solved to this tolerance (or the
+#: solve's, if looser): their rigid surfaces' places are extrapolated to the fine grid
+#: (:data:`OFFSET_RATIO`), which needs them to about ``1e-5 h0``, where the coarse
+#: start's usual ``1e-3`` leaves the fine solve that much mean-gap error to move off.
+LEVEL_TOLERANCE = 1e-5
+#: The offset ``max(h) - d`` at a mean gap converges with the grid: each level's step
+#: from the one below is some times smaller than the step below it, 2.7-2.8 between
+#: the two finest levels of the benchmarks' maps at 1024^2-4096^2, 3.4-4.5 further down
+#: and on 256^2 maps.  The fine grid's offset is the coarse one plus the last step over
+#: this ratio: where the true ratio is anywhere from 1.5 to 4.5, that leaves at most
+#: half the coarse offset's error (a tenth at 2.7).
+OFFSET_RATIO = 3.0
+#: The slope of the mean gap against the offset is measured (:func:`measured_slope`)
+#: on the coarse level with a side at most this fraction of the fine grid's (or on the
+#: coarsest level, if the levels stop above it): it hardly depends on the grid, within
+#: 0.2-2 % of the fine grid's at an eighth of its side on the benchmarks' maps at
+#: 1024^2-8192^2 (2-3 % on 256^2 maps), for two solves of a 64th of the fine grid's points.
+SLOPE_LEVEL = 8
+#: The relative error allowed for that slope on the finer levels: a secant must be
+#: surer than this to replace it.
+SLOPE_SPREAD = 0.03
+#: The depth step of the measurement, over ``h0``: the size of a first move, so that
+#: the contact's growth over a move is in the slope.
+SLOPE_STEP = 1e-4
+#: The tolerance of the measurement's two solves: their mean gaps are then read to
+#: about 1e-8 ``h0``, 2e-4 of their difference.
+SLOPE_TOLERANCE = 1e-7
 
 
 class DepthForMeanGap:
@@ -35,9 +67,12 @@ class DepthForMeanGap:
 
     * When: once the residual is below :data:`FORCING` times the mean-gap error over
       ``h0``; a solve converges only with the error within the tolerance.
-    * How far: a secant step of ``m`` against the offset, its slope (between 0,
-      rigid-plastic, and 1, rigid) measured between moves, before the second
-      ``slope`` (the coarse grid's, where there is one).
+    * How far: a step of ``m`` against the offset with the slope ``slope`` (between
+      0, rigid-plastic, and 1, rigid), known to ``slope_error``: the coarse levels'
+      measurement (:func:`measured_slope`), or the rigid 1 without one.  The secant
+      between two moves replaces it where it is surer, its error taken as
+      :data:`READ_ERROR` times the two reads' residuals over the change of ``m``: a
+      secant through the unsettled reads of a start's first iterations is not.
     * How: the pressure moves with the depth along the shape of a flat punch on the
       contact set, which keeps the gap there near zero
       (:meth:`~petgap.solvers.pressure_cg.PressureCG.move_depth`).  Each move
@@ -47,8 +82,10 @@ class DepthForMeanGap:
     ``log``: a line per move (:func:`~petgap.solvers.progress.outer_step`).  Collective.
     """
 
-    def __init__(self, problem, target, tolerance, slope=1.0, bound=None, log=True):
-        self.target, self.tolerance, self.slope = target, tolerance, slope
+    def __init__(self, problem, target, tolerance, slope=1.0, slope_error=1.0, bound=None,
+                 log=True):
+        self.target, self.tolerance = target, tolerance
+        self.slope, self.slope_error = slope, slope_error
         self.gap_scale = problem.gap_scale
         self.top = problem.top_height
         self.last, self.moves, self.error = None, 0, None
@@ -67,8 +104,11 @@ class DepthForMeanGap:
             return None
         if self.last is not None and cg.offset != self.last[0]:
             measured = (mean - self.last[1]) / (cg.offset - self.last[0])
-            self.slope = min(measured, 1.0) if measured > 1e-3 else self.slope
-        self.last = (cg.offset, mean)
+            change = abs(mean - self.last[1]) / self.gap_scale
+            sure = READ_ERROR * (self.last[2] + residual) / max(change, 1e-300)
+            if measured > 1e-3 and sure < self.slope_error:
+                self.slope, self.slope_error = min(measured, 1.0), sure
+        self.last = (cg.offset, mean, residual)
         offset = cg.offset + (self.target - mean) / self.slope
         if offset >= self.top:   # past first touch: halve the depth instead
             offset = 0.5 * (cg.offset + self.top)
@@ -89,17 +129,34 @@ def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *
     depth ``d`` of one :class:`~petgap.mechanics.problem.Indentation` solve whose
     depth :class:`DepthForMeanGap` moves as the iterate's mean gap settles.  The mean
     gap ``m(d) = mean(u) - mean(h) + max(h) - d`` falls with ``d`` at a slope
-    between -1 (rigid) and 0.  A cold solve starts where the same mean gap on the
-    coarse start's grid (:mod:`petgap.solvers.coarse`, the topography
-    block-averaged; solved by this function, level by level) put the depth, with
-    the slope its moves measured and its pressure prolonged; without a coarse grid
-    (or a cold start asked off), from the rigid estimate ``u = 0`` (a depth below
-    the answer, since ``u >= 0`` under compression) with the rigid slope.  Converged when
-    the KKT residual and ``|m - g_bar| / h0`` are within the tolerance.
+    between -1 (rigid) and 0.
+
+    A cold solve starts from the coarse start's grids (:mod:`petgap.solvers.coarse`,
+    the topography block-averaged), each solving the same mean gap by this function
+    to :data:`LEVEL_TOLERANCE`: the depth is where the last levels put the rigid
+    surface, extrapolated to the fine grid (:func:`_extrapolated`), the slope is the
+    one measured on the level :data:`SLOPE_LEVEL` times coarser
+    (:func:`measured_slope`), and the pressure the first coarse level's, prolonged.
+    Without a coarse grid (or a cold start asked off) it starts from the rigid
+    estimate ``u = 0`` (a depth below the answer, since ``u >= 0`` under
+    compression) with the rigid slope.  Converged when the KKT residual and
+    ``|m - g_bar| / h0`` are within the tolerance.
 
     Returns the solution with ``control`` set to the mean gap, its ``depth`` and
-    ``depth_slope`` (the rule's last slope of ``m`` against ``-d``) and the number of
-    ``depth_moves``.
+    ``depth_slope`` (the slope of ``m`` against ``-d`` the moves used last) and the
+    number of ``depth_moves``.
+    """
+    return _solve(problem, control, settings, initial_pressure, monitor,
+                  problem.grid.nx // SLOPE_LEVEL, top=True)
+
+
+def _solve(problem, control, settings, initial_pressure, monitor, slope_side, top=False):
+    """:func:`solve_mean_gap_by_indentation` on one level.
+
+    The slope is measured on this level if it is not the ``top`` (the grid asked
+    for) and its side is ``slope_side``, or larger with no coarser level below it.
+    The solution also carries ``coarse_offsets``, the offsets the levels below it
+    found (finest first), for the extrapolation one level up.
     """
     g_bar = float(control.mean_gap)
     timer = Timer()
@@ -108,54 +165,121 @@ def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *
         state = touching_state(problem, control, timer)
         state.gap += g_bar - reach
         state.mean_gap = g_bar
-        state.approach = reach - g_bar
+        state.approach = state.depth = reach - g_bar
+        state.depth_slope, state.slope_error, state.depth_moves = 1.0, 1.0, 0
+        state.coarse_offsets = []
         return state
     start_ops = problem.operator_applications
-    depth, slope, pressure, description = reach - g_bar, 1.0, initial_pressure, ""
+    start = _Start(reach - g_bar)
     if initial_pressure is None and settings.coarse_start:
-        depth, slope, pressure, description = _coarse_depth(problem, control, settings, depth)
-    rule = DepthForMeanGap(problem, g_bar, settings.tolerance, slope,
+        start = _coarse_depth(problem, control, settings, start.depth, slope_side)
+    else:
+        start.pressure = initial_pressure
+    rule = DepthForMeanGap(problem, g_bar, settings.tolerance, start.slope, start.slope_error,
                            bound=settings.max_iterations)
-    solution = polonsky_keer(problem, Indentation(depth), settings.but(
-        coarse_start=settings.coarse_start and pressure is None),
-        initial_pressure=pressure, monitor=monitor, retarget=rule)
+    solution = polonsky_keer(problem, Indentation(start.depth), settings.but(
+        coarse_start=settings.coarse_start and start.pressure is None),
+        initial_pressure=start.pressure, monitor=monitor, retarget=rule)
     solution.start = "; ".join(filter(None, [
-        f"the depth moved {rule.moves} times to the mean gap", description, solution.start]))
-    solution.depth, solution.depth_slope, solution.depth_moves = \
-        solution.approach, rule.slope, rule.moves
+        f"the depth moved {rule.moves} times to the mean gap", start.description,
+        solution.start]))
+    solution.depth, solution.depth_moves = solution.approach, rule.moves
+    solution.depth_slope, solution.slope_error = rule.slope, rule.slope_error
+    solution.coarse_offsets = start.coarse_offsets
+    at_side = problem.grid.nx == slope_side or (start.lowest and problem.grid.nx > slope_side)
+    if not top and at_side and solution.converged:
+        measured = measured_slope(problem, solution.depth, solution.pressure, settings)
+        if measured is not None:
+            solution.depth_slope, solution.slope_error = measured, SLOPE_SPREAD
+            solution.start += f"; slope {measured:.4g} measured here"
     solution.control = control
     solution.operator_applications = problem.operator_applications - start_ops
     solution.wall_time = timer()
     return solution
 
 
-def _coarse_depth(problem, control, settings, depth):
-    """``(depth, slope, pressure, description)`` from the same mean gap on the coarse grid.
+def measured_slope(problem, depth, pressure, settings):
+    """The slope of the mean gap against the offset near ``depth``, by two indentation solves.
 
-    The coarse problem is solved by this module to the coarse tolerance (from its
-    own coarse grid), and its pressure prolonged to the fine grid's scratch.  What
-    carries over is the rigid surface's place against the mean height, which the
-    block means keep, not its depth below the highest point, which they lower:
-    the fine depth is the coarse one plus the difference of the two highest points
-    (``offset = max(h) - depth`` is the same on both grids).  Where
-    there is no coarse grid, or the coarse solve failed, the rigid estimate
-    ``depth`` with slope 1 and no pressure.  Collective.
+    The mean gaps at ``depth`` and ``depth - SLOPE_STEP h0``, each solved to
+    :data:`SLOPE_TOLERANCE` from the pressure before it (the first from
+    ``pressure``), over the step; None if either did not converge or the slope is
+    not in ``(0, 1]``.  Why two solves: the secant through the moves of a solve
+    reads unsettled iterates, and is 5-15 % off at a start's first move; this one
+    reads converged states.  Collective.
+    """
+    step = SLOPE_STEP * problem.gap_scale
+    tight = settings.but(tolerance=min(settings.tolerance, SLOPE_TOLERANCE))
+    deep = polonsky_keer(problem, Indentation(depth), tight, initial_pressure=pressure)
+    if not deep.converged:
+        return None
+    shallow = polonsky_keer(problem, Indentation(depth - step), tight,
+                            initial_pressure=deep.pressure)
+    slope = (shallow.mean_gap - deep.mean_gap) / step
+    return slope if shallow.converged and 0 < slope <= 1 else None
+
+
+class _Start:
+    """Where a level's solve starts: depth, slope and its error, pressure, and what
+    they came from (``lowest``: no coarser level; ``coarse_offsets``: the offsets the
+    levels below found, finest first, for the extrapolation one level up)."""
+
+    def __init__(self, depth, slope=1.0, slope_error=1.0, pressure=None, description="",
+                 lowest=True, coarse_offsets=()):
+        self.depth, self.slope, self.slope_error = depth, slope, slope_error
+        self.pressure, self.description = pressure, description
+        self.lowest, self.coarse_offsets = lowest, list(coarse_offsets)
+
+
+def _coarse_depth(problem, control, settings, depth, slope_side=0):
+    """The :class:`_Start` from the same mean gap on the coarse grid.
+
+    The coarse problem is solved by this module to :data:`LEVEL_TOLERANCE` (from its
+    own coarse grid, the slope measured on the level ``slope_side`` says), and its
+    pressure prolonged to the fine grid's scratch.  What carries over is the rigid
+    surface's place against the mean height, ``offset = max(h) - depth``, which the
+    block means keep, not its depth below the highest point, which they lower;
+    where the coarse level had a coarse level of its own, the offset is
+    extrapolated from the levels below (:func:`_extrapolated`).  Where there is no coarse
+    grid, or the coarse solve failed or found the surfaces apart, the rigid
+    estimate ``depth`` with slope 1 and no pressure.  Collective.
     """
     coarse_problem = coarse.coarse_problem(problem)
     if coarse_problem is None:
-        return depth, 1.0, None, ""
-    solution = solve_mean_gap_by_indentation(coarse_problem, control, settings.but(
-        tolerance=max(settings.tolerance, settings.coarse_tolerance), coarse_start=True,
-        search_precision="double", preconditioned=True))
+        return _Start(depth)
+    tolerance = max(settings.tolerance, min(settings.coarse_tolerance, LEVEL_TOLERANCE))
+    solution = _solve(coarse_problem, control, settings.but(
+        tolerance=tolerance, coarse_start=True, search_precision="double",
+        preconditioned=True), None, None, slope_side)
     cgrid = coarse_problem.grid
     description = (f"coarse {cgrid.nx}x{cgrid.ny}: {solution.iterations} iterations, "
                    f"{solution.reason}")
     finite = problem.grid.comm.allreduce(bool(np.isfinite(solution.pressure).all()),
                                          op=MPI.LAND)
-    if not (solution.converged and finite):
-        return depth, 1.0, None, description + " (not used)"
+    if not (solution.converged and finite) or solution.reason == "zero_load":
+        return _Start(depth, description=description + " (not used)", lowest=False)
     factor = problem.grid.nx // cgrid.nx
     pressure = coarse.prolong(cgrid.x_slice.start, problem.grid, solution.pressure, factor,
                               coarse.is_whole(problem.grid, cgrid))
-    depth = solution.depth + problem.top_height - coarse_problem.top_height
-    return depth, solution.depth_slope, pressure, description
+    offsets = [coarse_problem.top_height - solution.depth] + solution.coarse_offsets
+    offset = _extrapolated(offsets)
+    if offset != offsets[0]:
+        description += ", its offset extrapolated"
+    return _Start(problem.top_height - offset, solution.depth_slope, solution.slope_error,
+                  pressure, description, lowest=False, coarse_offsets=offsets)
+
+
+def _extrapolated(offsets):
+    """The fine grid's offset from the levels' below it, finest first (:data:`OFFSET_RATIO`).
+
+    ``offsets[0]`` itself unless there are two, or if three give two steps that
+    do not shrink in the same direction (then the levels say nothing of the next
+    step)."""
+    if len(offsets) < 2:
+        return offsets[0]
+    last = offsets[0] - offsets[1]
+    if len(offsets) > 2:
+        below = offsets[1] - offsets[2]
+        if last * below <= 0 or abs(below) <= abs(last):
+            return offsets[0]
+    return offsets[0] + last / OFFSET_RATIO

@@ -449,7 +449,7 @@ def test_the_coarse_start_carries_the_rigid_surface_not_its_depth(comm):
     depth = 0.5
     control = petgap.MeanGap(petgap.solve(problem, petgap.Indentation(depth)).mean_gap)
     settings = SolverSettings()
-    start = _coarse_depth(problem, control, settings, 0.0)[0]
+    start = _coarse_depth(problem, control, settings, 0.0).depth
     on_coarse = solve_mean_gap_by_indentation(coarse.coarse_problem(problem), control,
                                               settings.but(tolerance=settings.coarse_tolerance))
     assert abs(start - depth) < 0.5 * abs(on_coarse.depth - depth), (start, on_coarse.depth)
