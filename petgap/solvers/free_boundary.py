@@ -116,22 +116,6 @@ def first_cell_target(problem, on_cell, target):
 #: The mean-gap secant's inner solves (:func:`~petgap.solvers.convergence.secant_tolerance`):
 #: each to a tenth of the mean-gap error left, the first to 1e-4.
 SECANT_FORCING, SECANT_LOOSEST = 0.1, 1e-4
-#: A read of an iterate's map mean gap lies within about this many times the iterate's
-#: KKT residual of the converged one's (as for the pressure solver's depth,
-#: :data:`petgap.solvers.indentation.READ_ERROR`): a secant between two moves is
-#: trusted to this times their residuals over the change of the map's mean gap.
-READ_ERROR = 0.1
-#: The slope of the map's mean gap against the cell's is measured (:func:`measured_slope`)
-#: on the level whose map side is at most this fraction of the fine map's (or the
-#: coarsest): it hardly depends on the grid (0.9625 / 0.9624 / 0.9590 on the 256^2,
-#: 128^2 and 64^2 maps below a 512^2 adhesive map, ``w = 0.15``), where the secants of
-#: the levels' own moves carried one 5 % off to the fine map.
-SLOPE_LEVEL = 8
-#: The relative error allowed for that slope on the finer levels: a secant must be
-#: surer than this to replace it.
-SLOPE_SPREAD = 0.03
-#: The cell target's step of the measurement over ``h0``, and its solves' tolerance.
-SLOPE_STEP, SLOPE_TOLERANCE = 1e-4, 1e-7
 
 
 class MapMeanGap:
@@ -150,11 +134,9 @@ class MapMeanGap:
       mean gap of an iterate settles long before its residual does (a smooth
       functional of the gap), so the move reads a nearly converged mean gap; read
       earlier, on sticky maps, the secant's slopes go astray (docs/design.md).
-    * How far: a step on the map's mean gap against the cell's with the slope
-      ``slope``, known to ``slope_error``: the coarse levels' measurement
-      (:func:`measured_slope`), or 1 without one.  The secant between two moves
-      replaces it where it is surer, its error taken as :data:`READ_ERROR` times
-      the two reads' residuals over the change of the map's mean gap.
+    * How far: a secant step on the map's mean gap against the cell's, its slope
+      measured between moves (``slope`` before the second: the coarser level's,
+      where there is one).
     * How: from the second move on, the gap is first carried along the last move's
       response, scaled to the new step (:meth:`_predict`); gap_cg then projects it onto
       the new mean.  The first move is the projection's shift of the free points alone.
@@ -164,11 +146,10 @@ class MapMeanGap:
     """
 
     def __init__(self, cell, map_shape, target, gap_scale, tolerance, cell_target,
-                 slope=1.0, forcing=3.0, log=False, bound=None, slope_error=1.0):
+                 slope=1.0, forcing=3.0, log=False, bound=None):
         self.cell, self.map_shape = cell, map_shape
         self.target, self.gap_scale, self.tolerance = target, gap_scale, tolerance
         self.cell_target, self.slope, self.forcing = cell_target, slope, forcing
-        self.slope_error = slope_error
         self.last, self.moves, self.error = None, 0, None
         self.before, self.last_step = None, None
         self.timer, self.bound = (Timer() if log else None), bound
@@ -186,11 +167,8 @@ class MapMeanGap:
             return None
         if self.last is not None and self.cell_target != self.last[0]:
             measured = (mean - self.last[1]) / (self.cell_target - self.last[0])
-            change = abs(mean - self.last[1]) / self.gap_scale
-            sure = READ_ERROR * (self.last[2] + residual) / max(change, 1e-300)
-            if measured > 1e-3 and sure < self.slope_error:
-                self.slope, self.slope_error = measured, sure
-        self.last = (self.cell_target, mean, residual)
+            self.slope = measured if measured > 1e-3 else self.slope
+        self.last = (self.cell_target, mean)
         step = (self.target - mean) / self.slope
         self._predict(g, step)
         self.cell_target += step
@@ -222,73 +200,38 @@ class MapMeanGap:
 
 
 def map_mean_gap(on_cell, map_shape, target, guess, settings, *, slope=1.0, initial_gap=None,
-                 monitor=None, log=False, slope_side=None):
+                 monitor=None, log=False):
     """The cell's gap solve whose map has mean gap ``target``: ``(solution, rule)``.
 
     One :func:`~petgap.solvers.gap_cg.gap_cg` solve with a moving cell target
     (:class:`MapMeanGap`).  A cold solve starts as gap_cg's coarse-grid start would
     (:func:`~petgap.solvers.gap_start.coarse_start_gap`), but each coarse level is this
-    same solve on its own map (the map's blocks): it finds the cell target on a
-    quarter of the points, and the fine solve starts from it, with the slope measured
-    on the level whose map side is ``slope_side`` (by default an eighth of this map's:
-    :data:`SLOPE_LEVEL`), or on the coarsest above it.  Collective.
+    same solve on its own map (the map's blocks): it finds the cell target and the
+    secant's slope on a quarter of the points, and the fine solve starts from both.
+    Collective.
     """
     cell = on_cell.grid
-    top = slope_side is None
-    if top:
-        slope_side = map_shape[0] // SLOPE_LEVEL
-    start, slope_error, lowest = "", 1.0, True
+    start = ""
     if initial_gap is None:
         found = []
 
         def level(coarse_cell, control, coarse_settings):
             f = cell.nx // coarse_cell.grid.nx
             solution, rule = map_mean_gap(coarse_cell, (map_shape[0] // f, map_shape[1] // f),
-                                          target, control.mean_gap, coarse_settings, slope=slope,
-                                          slope_side=slope_side)
+                                          target, control.mean_gap, coarse_settings, slope=slope)
             found.append(rule)
             return solution
         initial_gap, start = coarse_start_gap(on_cell, MeanGap(guess), settings, level)
-        lowest = not found
         if found and initial_gap is not None:
-            guess, slope, slope_error = found[0].cell_target, found[0].slope, \
-                found[0].slope_error
+            guess, slope = found[0].cell_target, found[0].slope
     rule = MapMeanGap(cell, map_shape, target, on_cell.gap_scale, settings.tolerance, guess,
-                      slope, log=log, bound=settings.max_iterations, slope_error=slope_error)
+                      slope, log=log, bound=settings.max_iterations)
     solution = gap_cg(on_cell, MeanGap(guess), settings, initial_gap=initial_gap,
                       monitor=monitor, retarget=rule)
     rule.before = None  # the predictor's field: not kept with the solution
-    at_side = map_shape[0] == slope_side or (lowest and map_shape[0] > slope_side)
-    if not top and at_side and solution.converged:
-        measured = measured_slope(on_cell, map_shape, rule.cell_target, solution.gap, settings)
-        if measured is not None:
-            rule.slope, rule.slope_error = measured, SLOPE_SPREAD
-            start = "; ".join(filter(None, [start, f"slope {measured:.4g} measured on "
-                                                   f"{map_shape[0]}x{map_shape[1]}"]))
     if start:
         solution.start = "; ".join(filter(None, [start, solution.start]))
     return solution, rule
-
-
-def measured_slope(on_cell, map_shape, cell_target, gap, settings):
-    """The slope of the map's mean gap against the cell's near ``cell_target``, by two solves.
-
-    The cell solved at ``cell_target`` and ``SLOPE_STEP h0`` above it, each to
-    :data:`SLOPE_TOLERANCE` from the gap before it (the first from ``gap``); None if
-    either did not converge or the slope is not positive.  Why two solves: the
-    secant through a solve's own moves reads unsettled iterates.  Collective.
-    """
-    step = SLOPE_STEP * on_cell.gap_scale
-    tight = settings.but(tolerance=min(settings.tolerance, SLOPE_TOLERANCE))
-    low = gap_cg(on_cell, MeanGap(cell_target), tight, initial_gap=gap)
-    if not low.converged:
-        return None
-    high = gap_cg(on_cell, MeanGap(cell_target + step), tight, initial_gap=low.gap)
-    if not high.converged:
-        return None
-    slope = (map_mean(on_cell.grid, map_shape, high.gap)
-             - map_mean(on_cell.grid, map_shape, low.gap)) / step
-    return slope if slope > 0 else None
 
 
 class PaddedCell:
