@@ -6,6 +6,9 @@ own, which follows the pressure, so the mean gap is reached as the depth of an
 :class:`~petgap.mechanics.problem.Indentation` solve whose depth moves during
 the solve (:func:`solve_mean_gap_by_indentation`, :class:`DepthForMeanGap`).
 """
+from dataclasses import dataclass, field
+from typing import Optional
+
 import numpy as np
 from mpi4py import MPI
 
@@ -219,16 +222,19 @@ def measured_slope(problem, depth, pressure, settings):
     return slope if shallow.converged and 0 < slope <= 1 else None
 
 
+@dataclass
 class _Start:
     """Where a level's solve starts: depth, slope and its error, pressure, and what
     they came from (``lowest``: no coarser level; ``coarse_offsets``: the offsets the
     levels below found, finest first, for the extrapolation one level up)."""
 
-    def __init__(self, depth, slope=1.0, slope_error=1.0, pressure=None, description="",
-                 lowest=True, coarse_offsets=()):
-        self.depth, self.slope, self.slope_error = depth, slope, slope_error
-        self.pressure, self.description = pressure, description
-        self.lowest, self.coarse_offsets = lowest, list(coarse_offsets)
+    depth: float
+    slope: float = 1.0
+    slope_error: float = 1.0
+    pressure: Optional[np.ndarray] = None
+    description: str = ""
+    lowest: bool = True
+    coarse_offsets: list = field(default_factory=list)
 
 
 def _coarse_depth(problem, control, settings, depth, slope_side=0):
