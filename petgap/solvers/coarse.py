@@ -72,6 +72,9 @@ COARSE_TOLERANCE = 1e-3
 WHOLE_POINTS = 256 * 256
 #: Fine rows :func:`prolong` writes at a time.
 PROLONG_CHUNK = 128
+#: Blocks from a free map's edge that :func:`edge_profile` shapes (the third's shares
+#: differ from the block mean by 3 %, less than the interior's prolongation error).
+EDGE_BLOCKS = 2
 
 
 def coarsening_factor(shape):
@@ -191,3 +194,45 @@ def prolong(first_row, grid, field, f, whole=False, out=None):
             for j in range(f):
                 part[i0::f, j::f] = rows[b0:b0 + count]
     return out
+
+
+def edge_shares(n, f, blocks=EDGE_BLOCKS):
+    """Weights of a free map's fine pixels along one side of ``n``, for :func:`edge_profile`.
+
+    The pixel at ``m`` pixels from the nearer edge, in block ``k = m // f``, gets
+    ``f (sqrt(m + 1) - sqrt(m)) / (sqrt(f (k + 1)) - sqrt(f k))``: its share of
+    the block's integral of ``s^(-1/2)``, ``s`` the distance to the edge.  The
+    shares of a block sum to ``f``; pixels farther in get 1.
+    """
+    w = np.ones(n)
+    for m in range(min(f * blocks, n // 2)):
+        k = m // f
+        share = f * (np.sqrt(m + 1) - np.sqrt(m)) / (np.sqrt(f * (k + 1)) - np.sqrt(f * k))
+        w[m] = w[n - 1 - m] = share
+    return w
+
+
+def edge_profile(grid, field, f):
+    """Give a prolonged pressure on a free map the square-root profile of the map's edges.
+
+    Why: on a free boundary no pressure acts outside the map, so a contact patch
+    that the map's edge cuts ends there as a flat punch does, its pressure rising
+    like ``s^(-1/2)`` towards the edge (``s`` the distance to it).  Repeated over
+    its block, a coarse edge pixel's pressure leaves the outermost fine pixel too
+    low and the next too high (the converged fine field has 1.33-1.54 times the
+    block's mean in the outer one), and the fine solve's start has its largest
+    residual there.  Each of the :data:`EDGE_BLOCKS` blocks nearest an edge shares
+    its value out in proportion to the profile's integral over its pixels
+    (:func:`edge_shares`, the product of the two sides' at a corner): block means,
+    hence the load, are kept, and a block out of contact stays at zero.  In place on
+    this rank's slab (``field``, of the grid's local shape); depends on global
+    indices only, so not on the decomposition.
+    """
+    band = f * EDGE_BLOCKS
+    wy = edge_shares(grid.ny, f)
+    field[:, :band] *= wy[:band]
+    field[:, -band:] *= wy[-band:]
+    wx = edge_shares(grid.nx, f)[grid.x_slice]
+    rows = np.flatnonzero(wx != 1.0)
+    field[rows] *= wx[rows, None]
+    return field

@@ -91,6 +91,11 @@ MIN_SIDE = 32
 #: off by that share of itself, far below what one outer iteration gains (a
 #: factor of about 0.2), so the conjugate gradients see a fixed operator.
 INNER_TOLERANCE = 1e-6
+#: :data:`MIN_SIDE` on a free map.  There the term also carries the map's mean mode
+#: (a free map sinks under a mean pressure, which the local stiffness does not see at
+#: any size), which an indentation leaves to the iterations: on 512^2 maps with the
+#: term it takes the iterations of load control (docs/benchmarks.md).
+FREE_MIN_SIDE = 16
 
 
 def blocks(n, block=BLOCK):
@@ -218,12 +223,14 @@ def patch_interaction(half_space, theta, block=BLOCK):
     """A :class:`PatchInteraction` for ``half_space``'s grid, or None where it is not made.
 
     None where the coarse grid would have fewer than :data:`MIN_SIDE` blocks a side
-    (``block = 0`` turns it off); on a free boundary, the free map's far field.
+    (:data:`FREE_MIN_SIDE` on a free map; ``block = 0`` turns it off); on a free
+    boundary, the free map's far field.
     """
     grid = half_space.grid
     if not block:
         return None
-    if min(blocks(grid.nx, block), blocks(grid.ny, block)) < MIN_SIDE:
+    fewest = MIN_SIDE if half_space.periodic else FREE_MIN_SIDE
+    if min(blocks(grid.nx, block), blocks(grid.ny, block)) < fewest:
         return None
     return PatchInteraction(grid, half_space.contact_modulus, theta, block,
                             periodic=half_space.periodic)

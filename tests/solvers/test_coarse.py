@@ -11,8 +11,8 @@ import pytest
 from mpi4py import MPI
 
 from petgap.solvers import coarse as coarse_module
-from petgap.solvers.coarse import (coarse_problem, coarsening_factor, is_whole, prolong,
-                                   restrict)
+from petgap.solvers.coarse import (EDGE_BLOCKS, coarse_problem, coarsening_factor,
+                                   edge_profile, edge_shares, is_whole, prolong, restrict)
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.mechanics.half_space import ElasticHalfSpace
 from petgap.parallel.grid import Grid
@@ -63,6 +63,73 @@ def test_restriction_and_prolongation_match_numpy(comm, shape, f, chunk, one_ran
     # judged over all ranks, so that every rank fails together
     assert max_abs(coarse, means - coarse.local_part(expected)) <= 1e-14
     assert max_abs(grid, fine - grid.local_part(repeated)) == 0.0
+
+
+@pytest.mark.parametrize("f", [2, 3, 4])
+def test_edge_shares_are_the_square_root_profiles_pixel_integrals(f):
+    """Each pixel's share of its block is its part of the block's integral of
+    ``s^(-1/2)`` (a midpoint sum here, not the closed form); shares of a block sum to
+    ``f``; the far side mirrors the near one; pixels farther in keep their value."""
+    n = 8 * f * EDGE_BLOCKS
+    w = edge_shares(n, f)
+    s = (np.arange(200_000) + 0.5) / 200_000   # midpoints of a pixel, distance in pixels
+    for k in range(EDGE_BLOCKS):
+        integrals = np.array([np.mean(1 / np.sqrt(m + s)) for m in range(f * k, f * k + f)])
+        assert np.abs(w[f * k:f * k + f] - f * integrals / integrals.sum()).max() <= 2e-3
+        assert w[f * k:f * k + f].sum() == pytest.approx(f, rel=1e-12)
+    assert w[0] == pytest.approx(f * 1 / np.sqrt(f), rel=1e-12)   # 2 / sqrt 2 for f = 2
+    assert np.array_equal(w, w[::-1])
+    assert np.all(w[f * EDGE_BLOCKS:n - f * EDGE_BLOCKS] == 1.0)
+
+
+def test_edge_profile_matches_numpy_on_any_decomposition(comm):
+    """Rows of the x-edges lie on the first and last ranks' slabs (130 rows: 65 + 65)."""
+    shape = (130, 64)
+    grid = make_grid(shape, comm, size=(2.0, 1.0))
+    full = np.random.default_rng(3).random(shape)
+    local = grid.local_part(full).copy()
+    assert edge_profile(grid, local, 2) is local
+    expected = full * np.outer(edge_shares(130, 2), edge_shares(64, 2))
+    assert max_abs(grid, local - grid.local_part(expected)) <= 1e-15
+    # on a prolonged field the block means, hence the load, are kept
+    coarse = make_grid((65, 32), comm, size=(2.0, 1.0))
+    blocks = coarse.local_part(full[::2, ::2]).copy()
+    shaped = edge_profile(grid, prolong(coarse.x_slice.start, grid, blocks, 2), 2)
+    assert max_abs(coarse, restrict(grid, coarse, shaped, 2) - blocks) <= 1e-15
+
+
+def test_a_free_start_has_the_edges_square_root_profile(comm, monkeypatch):
+    """A gently curved punch pressed into full contact with a free 128^2 map: the fine
+    pressure rises like ``s^(-1/2)`` towards the map's edges.  The start prolonged with
+    the edges' profile is five times nearer it in the four pixels by the edges than
+    the start that repeats the coarse blocks there; inside, they differ only by what
+    the levels below, themselves started with or without the profile, left."""
+    from petgap.mechanics.free_half_space import FreeHalfSpace
+    n = 128
+    grid = make_grid((n, n), comm)
+    x = (np.arange(n)[grid.x_slice] + 0.5 - n / 2)[:, None]
+    y = (np.arange(n) + 0.5 - n / 2)[None, :]
+    h = np.ascontiguousarray(-(x ** 2 + y ** 2) / (200.0 * n))
+    problem = ContactProblem(grid, h, FreeHalfSpace(grid, E_STAR))
+    control = Load(0.05 * E_STAR)
+    fine = polonsky_keer(problem, control, SolverSettings(tolerance=1e-9)).pressure.copy()
+    assert grid.comm.allreduce(int((fine > 0).sum())) == n * n
+    band = np.zeros((n, n), dtype=bool)
+    band[:4] = band[-4:] = band[:, :4] = band[:, -4:] = True
+    band = band[grid.x_slice]
+
+    def start_errors():
+        p = coarse_start_pressure(problem, control, SolverSettings(tolerance=1e-8),
+                                  polonsky_keer)[0]
+        e = (p - fine) ** 2
+        return [np.sqrt(grid.comm.allreduce(float(e[m].sum()))
+                        / grid.comm.allreduce(int(m.sum()))) for m in (band, ~band)]
+
+    shaped = start_errors()
+    monkeypatch.setattr(coarse_module, "edge_profile", lambda grid, field, f: field)
+    repeated = start_errors()
+    assert shaped[0] < 0.3 * repeated[0]
+    assert shaped[1] == pytest.approx(repeated[1], rel=1e-3)
 
 
 def test_whole_coarse_grid_on_every_rank_matches_numpy(comm):

@@ -22,8 +22,8 @@ from petgap.solvers import patch_interaction as patch_interaction_module
 from petgap.solvers import preconditioners
 from petgap.solvers.dispatch import solve
 from petgap.solvers.mixed_precision import solve_mixed
-from petgap.solvers.patch_interaction import (MAX_SIDE, MIN_SIDE, PatchInteraction, blocks,
-                                              patch_interaction)
+from petgap.solvers.patch_interaction import (FREE_MIN_SIDE, MAX_SIDE, MIN_SIDE,
+                                              PatchInteraction, blocks, patch_interaction)
 from petgap.solvers.pressure_cg import polonsky_keer
 from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
@@ -138,6 +138,11 @@ def test_no_interaction_where_it_does_not_apply(comm):
     assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6) is None  # 30 blocks a side
     assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=30) is not None
     assert patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=0) is None
+    # a free map's term carries its mean mode too: made from FREE_MIN_SIDE blocks
+    assert FREE_MIN_SIDE < MIN_SIDE
+    assert patch_interaction(FreeHalfSpace(small, E_STAR), 0.6).shape == (60, 74)
+    smaller = Grid((FREE_MIN_SIDE * 32 - 32, 1200), comm=comm, planner="estimate")
+    assert patch_interaction(FreeHalfSpace(smaller, E_STAR), 0.6) is None
     # beyond MAX_SIDE blocks along a side the blocks grow: the coarse grid stays that small
     assert 1200 // 4 == 300 > MAX_SIDE and blocks(1200, 4) == MAX_SIDE
     far = patch_interaction(ElasticHalfSpace(small, E_STAR), 0.6, block=4)
@@ -159,11 +164,14 @@ def test_the_interaction_reaches_the_same_state_sooner(comm):
                              1e-9)
 
 
-@pytest.mark.parametrize("control", ["load", "indentation"])
-def test_the_free_interaction_reaches_the_same_state_sooner(comm, control):
-    """On a free map of 1024^2 (32 blocks a side), under load and under indentation."""
-    grid = Grid((1024, 1024), comm=comm, planner="estimate")
-    h = self_affine(grid, 0.8, 32.0, 512.0, rms_slope=0.1, seed=1)
+@pytest.mark.parametrize("n, control", [(1024, "load"), (1024, "indentation"),
+                                        (512, "indentation")])
+def test_the_free_interaction_reaches_the_same_state_sooner(comm, n, control):
+    """On a free map of 1024^2 (32 blocks a side), under load and under indentation; on
+    one of 512^2 (16 blocks, :data:`FREE_MIN_SIDE`) under indentation, whose mean mode
+    the local stiffness does not see."""
+    grid = Grid((n, n), comm=comm, planner="estimate")
+    h = self_affine(grid, 0.8, 32.0, n / 2, rms_slope=0.1, seed=1)
     problem = ContactProblem(grid, h, FreeHalfSpace(grid, E_STAR))
     control = (Load(0.002 * 0.1 * E_STAR) if control == "load"
                else Indentation(problem.top_height - problem.mean_height))
