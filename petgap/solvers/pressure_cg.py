@@ -294,10 +294,12 @@ class PressureCG:
         On a fixed contact set ``S`` an indentation's pressure is affine in the
         depth, with the flat punch on ``S``, ``y = C_SS^{-1} 1_S`` (``C = K^{-1}``), for
         derivative: moved along ``y``, the pressure keeps the gap on ``S`` at zero and
-        the iteration keeps its residual.  ``y`` costs a solve; the stiffness
-        restricted to ``S``, ``P_S K 1_S``, has its shape (large at the patches'
-        edges, small inside them, as a punch's pressure is) for one transform pair,
-        and is used in its place, scaled so that its displacement has unit mean on
+        the iteration keeps its residual.  ``y`` costs a solve; the preconditioner
+        applied to ``1_S`` approximates it for one transform pair: the stiffness
+        restricted to ``S``, ``P_S K 1_S``, has a punch's shape on each patch (large at
+        its edges, small inside it), and the patch interaction shares the force between
+        the patches (:meth:`~petgap.solvers.preconditioners.RestrictedStiffness.punch`).
+        It is used in ``y``'s place, scaled so that its displacement has unit mean on
         ``S`` (one more pair, at the first move only: the scale barely moves with the
         set).  A pressure scaled with the move instead, whose displacement on ``S``
         is the topography's and far from uniform, leaves a residual several times
@@ -311,6 +313,7 @@ class PressureCG:
         shape = contact.z   # scratch until the next preconditioned gap
         self.transforms.stiffness(contact.pidx, np.ones(len(contact.idx), dtype=self.dtype),
                                   shape)
+        self.preconditioner.punch(contact, shape)
         if self.punch_scale is None:
             image = np.empty(len(shape), dtype=self.dtype)
             self.problem.half_space.apply_sparse(contact.pidx, shape, inverse=True,
