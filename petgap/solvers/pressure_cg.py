@@ -85,13 +85,10 @@ of 7-digit numbers: the KKT residual cannot fall much below ``1e-7 max|h| /
 h0``, and :mod:`petgap.solvers.mixed_precision` refines such a solve in double.
 Near that floor the rounding of ``u`` moves edge points in and out of S at
 every iteration and the residual wanders instead of falling, so a
-solve whose residual has not fallen below
+single-precision solve whose residual has not fallen below
 :data:`STALL_FACTOR` of its best for :data:`STALL_ITERATIONS` iterations stops,
 unconverged, with the reason ``"stalled_round_off"`` rather than run on to
-its iteration limit.  Double precision has a floor too, far lower, which a
-tolerance can still ask past: a curved punch pressed into full contact with a
-free 256^2 map stops falling at 1.4e-10 on one rank and 4.5e-11 on two, where a
-tolerance below would otherwise run the default 10000 iterations.
+its iteration limit.
 
 On a double grid the two transforms that only find the step may run in single
 precision (``settings.search_precision``, :class:`~petgap.solvers.preconditioners.StepTransforms`).
@@ -129,11 +126,10 @@ from petgap.solvers.settings import SolverSettings
 #: fraction of the contact set enter it; in one with it, whenever a point enters
 #: (Polonsky and Keer's own rule, 0).  See "Restarts" in the module docstring.
 RESTART_FRACTION = 0.003
-#: A solve stops as ``"stalled_round_off"`` when its residual has not fallen below
-#: ``STALL_FACTOR`` times its best for ``STALL_ITERATIONS`` iterations (see "Precision"
-#: in the module docstring).  Far from the floor the residual falls by about half per
-#: iteration, so the rule never fires there: over the 108 solves of the robustness set's
-#: hardest surfaces (512^2, H = 0.3, 8 a0, both starts) the longest such run is 3.
+#: A single-precision solve stops as ``"stalled_round_off"`` when its residual
+#: has not fallen below ``STALL_FACTOR`` times its best for ``STALL_ITERATIONS``
+#: iterations (see "Precision" in the module docstring).  Far from the floor
+#: the residual falls by about half per iteration, so the rule never fires there.
 STALL_ITERATIONS = 20
 STALL_FACTOR = 0.9
 #: Fresh transforms of ``u = K^{-1} p`` at least this often, so that the
@@ -334,7 +330,6 @@ class PressureCG:
                 contact.merge(np.empty(0, dtype=INDEX), np.empty(0, dtype=self.dtype))
         self.offset = offset
         self.delta, self.fresh = 0.0, True
-        self.best, self.best_it = np.inf, self.it   # a new problem: its own floor
         self.preconditioner.moved()
 
     def _transform_u(self):
@@ -393,7 +388,9 @@ class PressureCG:
         return 0.5 * self.grid.pixel_area * global_sums(self.comm, local)[0]
 
     def _stalled(self, residual):
-        """A solve whose residual wanders at its round-off floor (module docstring)."""
+        """A single-precision solve whose residual wanders at its round-off floor."""
+        if self.dtype != np.float32:
+            return False
         if residual < STALL_FACTOR * self.best:
             self.best, self.best_it = residual, self.it
             return False
