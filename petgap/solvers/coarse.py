@@ -197,6 +197,15 @@ def prolong(first_row, grid, field, f, whole=False, out=None):
     return out
 
 
+def prolong_pressure(problem, first_row, field, f, whole=False, out=None):
+    """A coarse level's pressure on ``problem``'s grid: :func:`prolong`, and on a free map
+    the edges' profile (:func:`edge_profile`).  What both pressure starts prolong."""
+    pressure = prolong(first_row, problem.grid, field, f, whole, out)
+    if not problem.half_space.periodic:
+        edge_profile(problem.grid, pressure, f)
+    return pressure
+
+
 def edge_shares(n, f, blocks=EDGE_BLOCKS):
     """Weights of a free map's fine pixels along one side of ``n``, for :func:`edge_profile`.
 

@@ -242,7 +242,7 @@ def _coarse_depth(problem, control, settings, depth, slope_side=0):
 
     The coarse problem is solved by this module to :data:`LEVEL_TOLERANCE` (from its
     own coarse grid, the slope measured on the level ``slope_side`` says), and its
-    pressure prolonged with the edges' profile (:func:`petgap.solvers.coarse.edge_profile`).
+    pressure prolonged (:func:`petgap.solvers.coarse.prolong_pressure`).
     What carries over is the rigid surface's place against the mean height,
     ``offset = max(h) - depth``, which the block means keep, not its depth below the
     highest point, which they lower;
@@ -266,9 +266,8 @@ def _coarse_depth(problem, control, settings, depth, slope_side=0):
     if not (solution.converged and finite) or solution.reason == "zero_load":
         return _Start(depth, description=description + " (not used)", lowest=False)
     factor = problem.grid.nx // cgrid.nx
-    pressure = coarse.edge_profile(problem.grid, coarse.prolong(
-        cgrid.x_slice.start, problem.grid, solution.pressure, factor,
-        coarse.is_whole(problem.grid, cgrid)), factor)
+    pressure = coarse.prolong_pressure(problem, cgrid.x_slice.start, solution.pressure,
+                                       factor, coarse.is_whole(problem.grid, cgrid))
     offsets = [coarse_problem.top_height - solution.depth] + solution.coarse_offsets
     offset = _extrapolated(offsets)
     if offset != offsets[0]:

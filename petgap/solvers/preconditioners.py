@@ -328,12 +328,22 @@ class RestrictedStiffness:
         edge.update()   # kappa of the present S, as the next apply would have it
         ones = np.ones(len(contact.idx), dtype=shape.dtype)
         if patch is not None:
-            w, d = patch.sums(ones, edge.kappa, contact.idx)
-            y = patch.solve(w, d)
             kz = global_sums(self.comm, float(shape.sum(dtype=np.float64)))[0]
-            if (1.0 - edge.theta) * kz - float(np.dot(w, y)) > 0:
-                patch.subtract(shape, edge.kappa, contact.idx, y)
+            self._far_field(ones, shape, contact.idx, (1.0 - edge.theta) * kz)
         edge.subtract(shape, ones, contact.idx)
+
+    def _far_field(self, gS, zS, idx, gz):
+        """Subtract the patch interaction ``V y`` of ``gS`` from ``zS`` where ``(g, z)``, now
+        ``gz``, stays positive: the ``(g, V y)`` and ``sum_S V y`` taken off, or None
+        where it would not be (``zS`` then unchanged).  Collective."""
+        patch, kappa = self.patch, self.edge.kappa
+        w, d = patch.sums(gS, kappa, idx)
+        y = patch.solve(w, d)
+        patch_gz, patch_z = float(np.dot(w, y)), float(np.dot(d, y))
+        if not gz - patch_gz > 0:
+            return None
+        patch.subtract(zS, kappa, idx, y)
+        return patch_gz, patch_z
 
     def _take_terms_off(self, contact, kz, sum_z, sum_kg, sum_kgg, residual, iteration):
         """Subtract the patch and edge terms from ``contact.z`` while ``(g, z)`` stays positive.
@@ -348,14 +358,10 @@ class RestrictedStiffness:
         restart = use_patch != admission.used
         admission.used = False
         if use_patch:
-            patch = self.patch
-            w, d = patch.sums(gS, edge.kappa, idx)
-            y = patch.solve(w, d)
-            patch_gz, patch_z = float(np.dot(w, y)), float(np.dot(d, y))
-            if gz - patch_gz > 0:
-                patch.subtract(zS, edge.kappa, idx, y)
-                gz -= patch_gz
-                sum_z -= patch_z
+            taken = self._far_field(gS, zS, idx, gz)
+            if taken is not None:
+                gz -= taken[0]
+                sum_z -= taken[1]
                 admission.used, admission.used_from = True, residual
             else:
                 _log().info("iteration %d: the patch interaction of the preconditioner is not "

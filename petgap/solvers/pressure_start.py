@@ -199,7 +199,7 @@ def coarse_start_pressure(problem, control, settings, solver):
     or ``(None, why)`` when the coarse solve produced NaN.  The pressure is the fine
     grid's :meth:`~petgap.parallel.grid.Grid.scratch`, in the grid's precision: read
     it before the next transform.  On a free map the pressure near the edges takes
-    their profile (:func:`petgap.solvers.coarse.edge_profile`).  Collective.
+    their profile (:func:`petgap.solvers.coarse.prolong_pressure`).  Collective.
     """
     coarse_problem = coarse.coarse_problem(problem)
     if coarse_problem is None:
@@ -220,8 +220,5 @@ def coarse_start_pressure(problem, control, settings, solver):
     whole = coarse.is_whole(problem.grid, cgrid)
     # the coarse problem, grid and solution go before the fine iterations make their fields
     del solution, coarse_problem, cgrid
-    pressure = coarse.prolong(first_row, problem.grid, pressure, factor, whole,
-                              out=problem.grid.scratch())
-    if not problem.half_space.periodic:
-        coarse.edge_profile(problem.grid, pressure, factor)
-    return pressure, description
+    return (coarse.prolong_pressure(problem, first_row, pressure, factor, whole,
+                                    out=problem.grid.scratch()), description)

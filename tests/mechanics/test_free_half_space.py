@@ -405,17 +405,13 @@ def test_free_mean_gap_costs_less_than_two_load_solves(comm):
         (s.operator_applications, by_load.operator_applications)
 
 
-@pytest.mark.parametrize("move", [1e-3, -1e-3])
-def test_a_depth_move_takes_the_pressure_with_it(comm, move):
-    """``PressureCG.move_depth`` moves the pressure along a flat punch's shape on the contact
-    set, so a converged indentation moved by ``delta`` keeps the gap there well below
-    ``delta`` (a bare move of the depth leaves ``delta`` on every contact point), and the
-    solve ends at the new depth."""
+def _moved_once(grid, h, move):
+    """A converged indentation (at the load 0.002's depth) moved by ``move h0`` once its
+    residual is below 1e-9, solved on to 1e-10: ``(solution, depth, delta, the first
+    residual after the move, whether the patch interaction was in use at the move)``."""
     from petgap.mechanics.problem import Indentation
     from petgap.solvers.pressure_cg import polonsky_keer
     from petgap.solvers.settings import SolverSettings
-    grid = Grid((128, 128), comm=comm, planner="estimate", wisdom=False)
-    h = petgap.self_affine(grid, 0.8, 8.0, grid.Lx / 2, rms_slope=0.1, seed=3)
     problem = petgap.ContactProblem(grid, h, FreeHalfSpace(grid))
     depth = petgap.solve(problem, petgap.Load(0.002), tolerance=1e-10).approach
     delta = move * problem.gap_scale
@@ -423,7 +419,7 @@ def test_a_depth_move_takes_the_pressure_with_it(comm, move):
 
     def rule(cg, residual):
         if not seen and residual < 1e-9:
-            seen.append(cg.offset)
+            seen.append(cg.preconditioner.patch_used)
             return cg.offset + delta
         if len(seen) == 1:
             seen.append(residual)   # the first residual after the move
@@ -431,8 +427,21 @@ def test_a_depth_move_takes_the_pressure_with_it(comm, move):
 
     s = polonsky_keer(problem, Indentation(depth), SolverSettings(tolerance=1e-10),
                       retarget=rule)
-    assert s.converged and len(seen) == 2
-    assert 0 < seen[1] < 0.6 * abs(move), seen[1] / abs(move)
+    assert len(seen) == 2, seen
+    return s, depth, delta, seen[1], seen[0]
+
+
+@pytest.mark.parametrize("move", [1e-3, -1e-3])
+def test_a_depth_move_takes_the_pressure_with_it(comm, move):
+    """``PressureCG.move_depth`` moves the pressure along a flat punch's shape on the contact
+    set, so a converged indentation moved by ``delta`` keeps the gap there well below
+    ``delta`` (a bare move of the depth leaves ``delta`` on every contact point), and the
+    solve ends at the new depth."""
+    grid = Grid((128, 128), comm=comm, planner="estimate", wisdom=False)
+    h = petgap.self_affine(grid, 0.8, 8.0, grid.Lx / 2, rms_slope=0.1, seed=3)
+    s, depth, delta, after, _ = _moved_once(grid, h, move)
+    assert s.converged
+    assert 0 < after < 0.6 * abs(move), after / abs(move)
     assert s.approach == pytest.approx(depth - delta, rel=0, abs=1e-12 * depth)
 
 
@@ -441,28 +450,12 @@ def test_a_depth_move_shares_the_punch_between_the_patches(comm):
     pressure along the preconditioner's own flat punch ``M 1_S``, whose far field shares
     the punch's force between the patches: the residual after a move is below 0.3 of it
     (0.22; with ``P_S K 1_S`` alone, each patch punched as if it were alone, 0.41)."""
-    from petgap.mechanics.problem import Indentation
-    from petgap.solvers.pressure_cg import polonsky_keer
-    from petgap.solvers.settings import SolverSettings
+    move = 1e-5
     grid = Grid((512, 512), comm=comm, planner="estimate", wisdom=False)
     h = petgap.self_affine(grid, 0.8, 32.0, grid.Lx / 2, rms_slope=0.1, seed=1)
-    problem = petgap.ContactProblem(grid, h, FreeHalfSpace(grid))
-    depth = petgap.solve(problem, petgap.Load(0.002), tolerance=1e-10).approach
-    move = 1e-5
-    seen = []
-
-    def rule(cg, residual):
-        if not seen and residual < 1e-9:
-            seen.append(cg.preconditioner.patch_used)
-            return cg.offset + move * problem.gap_scale
-        if len(seen) == 1:
-            seen.append(residual)
-        return None
-
-    s = polonsky_keer(problem, Indentation(depth), SolverSettings(tolerance=1e-10),
-                      retarget=rule)
-    assert s.converged and seen[0], seen
-    assert 0 < seen[1] < 0.3 * move, seen[1] / move
+    s, _, _, after, patch_used = _moved_once(grid, h, move)
+    assert s.converged and patch_used
+    assert 0 < after < 0.3 * move, after / move
 
 
 def test_the_coarse_start_carries_the_rigid_surface_not_its_depth(comm):
