@@ -116,6 +116,25 @@ def first_cell_target(problem, on_cell, target):
 #: The mean-gap secant's inner solves (:func:`~petgap.solvers.convergence.secant_tolerance`):
 #: each to a tenth of the mean-gap error left, the first to 1e-4.
 SECANT_FORCING, SECANT_LOOSEST = 0.1, 1e-4
+#: A read of an iterate's map mean gap lies within about this many times its KKT
+#: residual (both over ``h0``) of the converged one at its cell target, so a secant
+#: between two moves is trusted to this times their residuals over the change of the
+#: map's mean gap (:class:`MapMeanGap`).
+READ_ERROR = 0.1
+#: The slope of the map's mean gap against the cell's is measured (:func:`measured_slope`)
+#: on the coarse level whose map side is at most this fraction of the fine map's (or on
+#: the coarsest level, if the levels stop above it): the slope hardly depends on the
+#: grid (1.29-1.31 on the levels of the 1024^2 benchmark map, ``w = 0.15``), where the
+#: secants through a coarse level's unsettled moves carried 1.04-1.18 up to the fine
+#: solve.
+SLOPE_LEVEL = 8
+#: The relative error allowed for that slope on the finer levels: a secant must be
+#: surer than this to replace it.
+SLOPE_SPREAD = 0.03
+#: The measurement's step of the cell's mean gap, over ``h0``: the size of a first move.
+SLOPE_STEP = 1e-4
+#: The tolerance of the measurement's two solves.
+SLOPE_TOLERANCE = 1e-7
 
 
 class MapMeanGap:
@@ -134,9 +153,12 @@ class MapMeanGap:
       mean gap of an iterate settles long before its residual does (a smooth
       functional of the gap), so the move reads a nearly converged mean gap; read
       earlier, on sticky maps, the secant's slopes go astray (docs/design.md).
-    * How far: a secant step on the map's mean gap against the cell's, its slope
-      measured between moves (``slope`` before the second: the coarser level's,
-      where there is one).
+    * How far: a secant step on the map's mean gap against the cell's.  Its slope is
+      ``slope``, known to ``slope_error`` (the coarse levels' measurement,
+      :func:`measured_slope`, or 1 without one), until a secant between two moves is
+      surer: its error taken as :data:`READ_ERROR` times the two reads' residuals over
+      the change of the map's mean gap, so that a secant through a start's unsettled
+      iterates does not replace a measured slope.
     * How: from the second move on, the gap is first carried along the last move's
       response, scaled to the new step (:meth:`_predict`); gap_cg then projects it onto
       the new mean.  The first move is the projection's shift of the free points alone.
@@ -146,10 +168,11 @@ class MapMeanGap:
     """
 
     def __init__(self, cell, map_shape, target, gap_scale, tolerance, cell_target,
-                 slope=1.0, forcing=3.0, log=False, bound=None):
+                 slope=1.0, slope_error=1.0, forcing=3.0, log=False, bound=None):
         self.cell, self.map_shape = cell, map_shape
         self.target, self.gap_scale, self.tolerance = target, gap_scale, tolerance
         self.cell_target, self.slope, self.forcing = cell_target, slope, forcing
+        self.slope_error = slope_error
         self.last, self.moves, self.error = None, 0, None
         self.before, self.last_step = None, None
         self.timer, self.bound = (Timer() if log else None), bound
@@ -167,8 +190,11 @@ class MapMeanGap:
             return None
         if self.last is not None and self.cell_target != self.last[0]:
             measured = (mean - self.last[1]) / (self.cell_target - self.last[0])
-            self.slope = measured if measured > 1e-3 else self.slope
-        self.last = (self.cell_target, mean)
+            change = abs(mean - self.last[1]) / self.gap_scale
+            sure = READ_ERROR * (self.last[2] + residual) / max(change, 1e-300)
+            if measured > 1e-3 and sure < self.slope_error:
+                self.slope, self.slope_error = measured, sure
+        self.last = (self.cell_target, mean, residual)
         step = (self.target - mean) / self.slope
         self._predict(g, step)
         self.cell_target += step
@@ -186,7 +212,13 @@ class MapMeanGap:
         edge like a crack tip, and the residual rises to about ten times the step over
         ``h0``; the state's own response to the last move, the difference of the gaps
         before the two moves, is a secant predictor of the whole state, and the
-        residual barely rises.  Keeps the gap before this move (one cell field).
+        residual barely rises.  Points at the wall stay there: a move that turns back
+        (the usual second move, which takes back the first one's overshoot) would
+        otherwise lift the edge points the last move closed, each loading its
+        neighbour like a crack tip (adhesive edges do not retrace their path), and the
+        residual rose a few hundred times the step over ``h0`` (``w = 0.15`` at
+        1024^2); points leave the wall through the gap solver's free set instead.
+        Keeps the gap before this move (one cell field).
         """
         if self.before is None:
             self.before, self.last_step = g.copy(), step
@@ -194,41 +226,89 @@ class MapMeanGap:
         diff = self.before
         np.subtract(g, diff, out=diff)          # the last move's response (and progress)
         diff *= step / self.last_step
+        np.copyto(diff, 0.0, where=g <= 0)
         g += diff
         np.subtract(g, diff, out=diff)          # the state before this move
         self.last_step = step
 
 
-def map_mean_gap(on_cell, map_shape, target, guess, settings, *, slope=1.0, initial_gap=None,
-                 monitor=None, log=False):
+def measured_slope(on_cell, map_shape, cell_target, gap, settings):
+    """``(slope, map mean gap)`` at ``cell_target`` by two tight gap solves, or None.
+
+    The map's mean gap at ``cell_target`` and at ``cell_target + SLOPE_STEP h0``, each
+    solved to :data:`SLOPE_TOLERANCE` from the state before it (the first from
+    ``gap``), and the slope between them.  Why: the secants through a solve's moves
+    read unsettled iterates, and on sticky maps a coarse level's moves are many and
+    far apart (secants of 0.27-1.05 on the coarsest level of the 2048^2 benchmark map,
+    ``w = 0.15``, where the measured slope is 1.27).  None if either solve did not
+    converge or the slope is not positive.  Collective.
+    """
+    cell = on_cell.grid
+    step = SLOPE_STEP * on_cell.gap_scale
+    tight = settings.but(tolerance=min(settings.tolerance, SLOPE_TOLERANCE))
+    at = gap_cg(on_cell, MeanGap(cell_target), tight, initial_gap=gap)
+    if not at.converged:
+        return None
+    moved = gap_cg(on_cell, MeanGap(cell_target + step), tight, initial_gap=at.gap)
+    if not moved.converged:
+        return None
+    mean = map_mean(cell, map_shape, at.gap)
+    slope = (map_mean(cell, map_shape, moved.gap) - mean) / step
+    return (slope, mean) if slope > 0 else None
+
+
+def map_mean_gap(on_cell, map_shape, target, guess, settings, *, slope=1.0, slope_error=1.0,
+                 slope_side=0, initial_gap=None, monitor=None, log=False, level=False):
     """The cell's gap solve whose map has mean gap ``target``: ``(solution, rule)``.
 
     One :func:`~petgap.solvers.gap_cg.gap_cg` solve with a moving cell target
     (:class:`MapMeanGap`).  A cold solve starts as gap_cg's coarse-grid start would
     (:func:`~petgap.solvers.gap_start.coarse_start_gap`), but each coarse level is this
-    same solve on its own map (the map's blocks): it finds the cell target and the
-    secant's slope on a quarter of the points, and the fine solve starts from both.
-    Collective.
+    same solve on its own map (the map's blocks): it finds the cell target on a quarter
+    of the points, and the fine solve starts from it.  The slope of the map's mean gap
+    against the cell's is measured (:func:`measured_slope`) on the coarse ``level`` whose
+    map side is ``slope_side``, or larger with no coarser level below it; the levels above
+    it start from that slope, known to :data:`SLOPE_SPREAD`, and from the cell target
+    that puts that level's map exactly at ``target``.  Collective.
     """
     cell = on_cell.grid
     start = ""
+    lowest = True
     if initial_gap is None:
         found = []
 
-        def level(coarse_cell, control, coarse_settings):
+        def solve_level(coarse_cell, control, coarse_settings):
             f = cell.nx // coarse_cell.grid.nx
             solution, rule = map_mean_gap(coarse_cell, (map_shape[0] // f, map_shape[1] // f),
-                                          target, control.mean_gap, coarse_settings, slope=slope)
+                                          target, control.mean_gap, coarse_settings,
+                                          slope=slope, slope_error=slope_error,
+                                          slope_side=slope_side, level=True)
             found.append(rule)
             return solution
-        initial_gap, start = coarse_start_gap(on_cell, MeanGap(guess), settings, level)
+        initial_gap, start = coarse_start_gap(on_cell, MeanGap(guess), settings, solve_level)
+        lowest = not found
         if found and initial_gap is not None:
             guess, slope = found[0].cell_target, found[0].slope
+            slope_error = found[0].slope_error
     rule = MapMeanGap(cell, map_shape, target, on_cell.gap_scale, settings.tolerance, guess,
-                      slope, log=log, bound=settings.max_iterations)
+                      slope, slope_error, log=log, bound=settings.max_iterations)
     solution = gap_cg(on_cell, MeanGap(guess), settings, initial_gap=initial_gap,
                       monitor=monitor, retarget=rule)
     rule.before = None  # the predictor's field: not kept with the solution
+    if level:
+        side, mean = map_shape[0], None
+        if slope_side and side >= slope_side and (lowest or side < 2 * slope_side) \
+                and rule.slope_error > SLOPE_SPREAD:
+            measured = measured_slope(on_cell, map_shape, rule.cell_target, solution.gap,
+                                      settings)
+            if measured is not None:
+                (rule.slope, mean), rule.slope_error = measured, SLOPE_SPREAD
+        # the level stopped at the coarse tolerance, its map's mean gap up to that far off
+        # the target: the level above starts from the cell target that removes the rest
+        if mean is None:
+            mean = rule.map_mean(solution.gap)     # reduced: NaN on every rank or none
+        if np.isfinite(mean):
+            rule.cell_target += (target - mean) / rule.slope
     if start:
         solution.start = "; ".join(filter(None, [start, solution.start]))
     return solution, rule
@@ -308,11 +388,12 @@ class PaddedCell:
         rule = getattr(warm, "map_rule", None)
         if warm is not None and rule is not None:
             guess = rule.cell_target + (target - rule.map_mean(warm.gap)) / rule.slope
-            slope, initial_gap = rule.slope, warm.gap
+            slope, slope_error, initial_gap = rule.slope, rule.slope_error, warm.gap
         else:
             guess = first_cell_target(problem, on_cell, target)
-            slope, initial_gap = 1.0, None if warm is None else warm.gap
+            slope, slope_error, initial_gap = 1.0, 1.0, None if warm is None else warm.gap
         solution, rule = map_mean_gap(on_cell, grid.shape, target, guess, settings, slope=slope,
+                                      slope_error=slope_error, slope_side=grid.nx // SLOPE_LEVEL,
                                       initial_gap=initial_gap, monitor=monitor, log=True)
         solution.map_rule = rule
         return solution, rule.moves
