@@ -106,3 +106,19 @@ def test_the_fine_solve_moves_on_a_measured_slope_and_keeps_its_residual(comm, m
     assert len(moves) >= 2
     for k in moves[1:]:
         assert seen[k + 1][0] <= 5 * seen[k][0], (seen[k], seen[k + 1])
+
+
+def test_a_settled_read_is_trusted_beyond_its_residual():
+    """A read taken at a residual of half the mean gap's change is known to 5 %, but one
+    that has stopped moving over the iteration before it is as sure as its change says: a
+    secant through it replaces even a measured slope."""
+    def second_slope(settled):
+        reads = [0.0, 0.6, 0.6] if settled else [0.0, 0.5, 0.6]
+        rule = _Reads(reads, slope=0.5, slope_error=0.03)
+        g = np.ones(3)
+        assert rule(g, 1e-6) == pytest.approx(2.0)
+        assert rule(g, 2.0) is None                 # not yet: residual > 3 x error
+        rule(g, 0.3)
+        return rule.slope
+    assert second_slope(settled=False) == 0.5
+    assert second_slope(settled=True) == pytest.approx(0.3)
