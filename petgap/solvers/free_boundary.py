@@ -168,8 +168,9 @@ class MapMeanGap:
       through settled reads does (the slope of a coarse level can be some per cent off
       the fine grid's: 1.31 against 1.23 at 4096^2, ``w = 0.15``).
     * How: from the second move on, the gap is first carried along the last move's
-      response, scaled to the new step (:meth:`_predict`); gap_cg then projects it onto
-      the new mean.  The first move is the projection's shift of the free points alone.
+      response, scaled to the new step, its points at the wall kept there
+      (:meth:`_predict`); gap_cg then projects it onto the new mean.  The first move is
+      the projection's shift of the free points alone.
 
     ``log``: a line per move (:func:`~petgap.solvers.progress.outer_step`), against the
     solve's iteration limit ``bound`` (a move costs an iteration).  Collective.
