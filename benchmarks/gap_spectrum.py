@@ -56,7 +56,8 @@ def hat_restriction(field, block):
 
 
 def state(n, work, rho):
-    """The converged adhesive mean-gap state on the GUIDE surface: ``(problem, gap)``."""
+    """The converged adhesive mean-gap state on the GUIDE surface: ``(problem, gap,
+    the solve's iterations)``."""
     grid = petgap.Grid((n, n), comm=MPI.COMM_SELF, planner="estimate")
     h = petgap.self_affine(grid, 0.8, 32.0, n / 2, rms_slope=0.1, seed=7)
     problem = petgap.ContactProblem(grid, h, petgap.ElasticHalfSpace(grid))
@@ -127,9 +128,9 @@ def spectrum(problem, gap, block, rho, iterations):
         if k + 1 < m:
             lanczos[k, k + 1] = lanczos[k + 1, k] = np.sqrt(betas[k]) / alphas[k]
     values, ritz = np.linalg.eigh(lanczos)
-    q0 = np.fft.fftfreq(n0)[:, None] * n0 / (n0 / (8 * block))
-    q1 = np.fft.fftfreq(n1)[None, :] * n1 / (n1 / (8 * block))
-    long_waves = np.hypot(q0, q1) < 1.0      # wavelengths above 8 coarse cells
+    # wavelengths above 8 coarse cells: frequencies below 1 / (8 block) cycles per pixel
+    long_waves = np.hypot(np.fft.fftfreq(n0)[:, None], np.fft.fftfreq(n1)[None, :]) \
+        < 1.0 / (8 * block)
     band = free & (gap < rho)
     shares = []
     for which in (0, -1):
