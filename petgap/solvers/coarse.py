@@ -246,3 +246,21 @@ def edge_profile(grid, field, f):
     rows = np.flatnonzero(wx != 1.0)
     field[rows] *= wx[rows, None]
     return field
+
+
+def extrapolated(values, ratio):
+    """A quantity on the next finer grid from its values on the levels, finest first.
+
+    ``values[0]`` plus the last step over ``ratio``: a quantity that converges with the
+    grid at an order whose steps shrink about ``ratio``-fold per level.  ``values[0]``
+    itself where there is only one level, or where three levels give two steps that do
+    not shrink in the same direction (the levels then say nothing of the next step).
+    """
+    if len(values) < 2:
+        return values[0]
+    last = values[0] - values[1]
+    if len(values) > 2:
+        below = values[1] - values[2]
+        if last * below <= 0 or abs(below) <= abs(last):
+            return values[0]
+    return values[0] + last / ratio

@@ -46,6 +46,7 @@ from mpi4py import MPI
 from petgap.mechanics.free_half_space import PaddedCellHalfSpace
 from petgap.mechanics.problem import ContactProblem, Load, MeanGap
 from petgap.parallel.collective import move_rows
+from petgap.solvers import coarse
 from petgap.solvers.convergence import Timer, secant_tolerance
 from petgap.solvers.control_loops import solve_as
 from petgap.solvers.gap_cg import gap_cg
@@ -140,6 +141,28 @@ SLOPE_SPREAD = 0.03
 SLOPE_STEP = 1e-4
 #: The tolerance of the measurement's two solves.
 SLOPE_TOLERANCE = 1e-7
+#: The cell target that puts a level's map at the mean gap converges with the grid at
+#: second order: each level's step from the one below is about this many times smaller
+#: than the step below it (4.2-5.1 between the levels of the benchmark maps at
+#: 1024^2-2048^2, ``w = 0.05`` and ``0.15``), so a level starts from the target of the
+#: one below plus its step over this ratio
+#: (:func:`~petgap.solvers.coarse.extrapolated`).  Without it the fine solve started
+#: 8e-5-1.3e-4 ``h0`` off, a move's worth.
+TARGET_RATIO = 4.0
+#: A move of the cell target by ``delta`` shifts the free points against the wall points,
+#: which loads every contact edge: the residual rises to about this times ``delta / h0``
+#: times ``h0 / (h0' a0)`` (the edge's stiffness ``E* / a0`` over the KKT unit ``h0' E*``;
+#: 0.64 at 1024^2 and 0.73 at 4096^2 on the benchmark maps, ``w = 0.15``).  So a move is
+#: made as soon as its read has settled once the residual is below that rise, where
+#: waiting for it to fall further buys nothing the move does not undo (:class:`MapMeanGap`).
+SHIFT_JUMP = 0.5
+#: A read has settled when it changed by at most this fraction of the mean-gap error over
+#: the iteration before ...
+EARLY_DRIFT = 0.1
+#: ... and is taken early only below this residual: above it the iterate is still the
+#: coarse level's prolonged state, whose read may pause and move on (it did on a map
+#: sticky at a pixel's range, whose mean gap jumps with the target).
+EARLY_RESIDUAL = 1e-3
 
 
 class MapMeanGap:
@@ -157,7 +180,10 @@ class MapMeanGap:
       error over ``h0`` (the forcing term of an inexact Newton method).  The map's
       mean gap of an iterate settles long before its residual does (a smooth
       functional of the gap), so the move reads a nearly converged mean gap; read
-      earlier, on sticky maps, the secant's slopes go astray (docs/design.md).
+      earlier, on sticky maps, the secant's slopes go astray (docs/design.md).  Or
+      earlier, once the read has settled (:data:`EARLY_DRIFT`) and the residual is
+      below the rise the move itself will cause, ``jump`` times the error
+      (:data:`SHIFT_JUMP`; 0: never), and below :data:`EARLY_RESIDUAL`.
     * How far: a secant step on the map's mean gap against the cell's.  Its slope is
       ``slope``, known to ``slope_error`` (the coarse levels' measurement,
       :func:`measured_slope`, or 1 without one), until a secant between two moves is
@@ -177,7 +203,7 @@ class MapMeanGap:
     """
 
     def __init__(self, cell, map_shape, target, gap_scale, tolerance, cell_target,
-                 slope=1.0, slope_error=1.0, forcing=3.0, log=False, bound=None):
+                 slope=1.0, slope_error=1.0, forcing=3.0, jump=0.0, log=False, bound=None):
         self.cell, self.map_shape = cell, map_shape
         self.target, self.gap_scale, self.tolerance = target, gap_scale, tolerance
         self.cell_target, self.slope, self.forcing = cell_target, slope, forcing
@@ -185,6 +211,8 @@ class MapMeanGap:
         self.last, self.moves, self.error, self.previous = None, 0, None, None
         self.before, self.last_step = None, None
         self.timer, self.bound = (Timer() if log else None), bound
+        self.jump = jump
+        self.levels = []   # with map_mean_gap's levels: their cell targets, finest first
 
     def map_mean(self, g):
         """The mean of the cell's gap ``g`` (this rank's slab) over the map's points."""
@@ -197,7 +225,10 @@ class MapMeanGap:
         error = abs(self.error)
         drift = np.inf if self.previous is None else abs(mean - self.previous) / self.gap_scale
         self.previous = mean
-        if error <= self.tolerance or residual > max(self.tolerance, self.forcing * error):
+        early = (drift <= EARLY_DRIFT * error
+                 and residual <= min(EARLY_RESIDUAL, self.jump * error))
+        if error <= self.tolerance or (residual > max(self.tolerance, self.forcing * error)
+                                       and not early):
             return None
         read = min(READ_ERROR * residual, SETTLED * drift)
         if self.last is not None and self.cell_target != self.last[0]:
@@ -282,13 +313,13 @@ def map_mean_gap(on_cell, map_shape, target, guess, settings, *, slope=1.0, slop
     against the cell's is measured (:func:`measured_slope`) on the coarse ``level`` whose
     map side is ``slope_side``, or larger with no coarser level below it; the levels above
     it start from that slope, known to :data:`SLOPE_SPREAD`, and from the cell target
-    that puts that level's map exactly at ``target``.  Collective.
+    that puts the levels' maps exactly at ``target``, extrapolated to this grid
+    (:data:`TARGET_RATIO`).  Collective.
     """
     cell = on_cell.grid
     start = ""
-    lowest = True
+    lowest, found = True, []
     if initial_gap is None:
-        found = []
 
         def solve_level(coarse_cell, control, coarse_settings):
             f = cell.nx // coarse_cell.grid.nx
@@ -301,10 +332,12 @@ def map_mean_gap(on_cell, map_shape, target, guess, settings, *, slope=1.0, slop
         initial_gap, start = coarse_start_gap(on_cell, MeanGap(guess), settings, solve_level)
         lowest = not found
         if found and initial_gap is not None:
-            guess, slope = found[0].cell_target, found[0].slope
-            slope_error = found[0].slope_error
+            guess = coarse.extrapolated(found[0].levels, TARGET_RATIO)
+            slope, slope_error = found[0].slope, found[0].slope_error
+    edge = on_cell.pressure_scale * cell.dx / on_cell.half_space.contact_modulus  # h0' a0
     rule = MapMeanGap(cell, map_shape, target, on_cell.gap_scale, settings.tolerance, guess,
-                      slope, slope_error, log=log, bound=settings.max_iterations)
+                      slope, slope_error, jump=SHIFT_JUMP * on_cell.gap_scale / edge, log=log,
+                      bound=settings.max_iterations)
     solution = gap_cg(on_cell, MeanGap(guess), settings, initial_gap=initial_gap,
                       monitor=monitor, retarget=rule)
     rule.before = None  # the predictor's field: not kept with the solution
@@ -317,11 +350,13 @@ def map_mean_gap(on_cell, map_shape, target, guess, settings, *, slope=1.0, slop
             if measured is not None:
                 (rule.slope, mean), rule.slope_error = measured, SLOPE_SPREAD
         # the level stopped at the coarse tolerance, its map's mean gap up to that far off
-        # the target: the level above starts from the cell target that removes the rest
+        # the target: the level above starts from the cell target that removes the rest,
+        # extrapolated with the levels' below it
         if mean is None:
             mean = rule.map_mean(solution.gap)     # reduced: NaN on every rank or none
         if np.isfinite(mean):
             rule.cell_target += (target - mean) / rule.slope
+        rule.levels = [rule.cell_target] + (found[0].levels if found else [])
     if start:
         solution.start = "; ".join(filter(None, [start, solution.start]))
     return solution, rule

@@ -137,7 +137,7 @@ def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *
     A cold solve starts from the coarse start's grids (:mod:`petgap.solvers.coarse`,
     the topography block-averaged), each solving the same mean gap by this function
     to :data:`LEVEL_TOLERANCE`: the depth is where the last levels put the rigid
-    surface, extrapolated to the fine grid (:func:`_extrapolated`), the slope is the
+    surface, extrapolated to the fine grid (:func:`~petgap.solvers.coarse.extrapolated`), the slope is the
     one measured on the level :data:`SLOPE_LEVEL` times coarser
     (:func:`measured_slope`), and the pressure the first coarse level's, prolonged.
     Without a coarse grid (or a cold start asked off) it starts from the rigid
@@ -247,7 +247,7 @@ def _coarse_depth(problem, control, settings, depth, slope_side=0):
     ``offset = max(h) - depth``, which the block means keep, not its depth below the
     highest point, which they lower;
     where the coarse level had a coarse level of its own, the offset is
-    extrapolated from the levels below (:func:`_extrapolated`).  Where there is no coarse
+    extrapolated from the levels below (:func:`~petgap.solvers.coarse.extrapolated`).  Where there is no coarse
     grid, or the coarse solve failed or found the surfaces apart, the rigid
     estimate ``depth`` with slope 1 and no pressure.  Collective.
     """
@@ -269,24 +269,8 @@ def _coarse_depth(problem, control, settings, depth, slope_side=0):
     pressure = coarse.prolong_pressure(problem, cgrid.x_slice.start, solution.pressure,
                                        factor, coarse.is_whole(problem.grid, cgrid))
     offsets = [coarse_problem.top_height - solution.depth] + solution.coarse_offsets
-    offset = _extrapolated(offsets)
+    offset = coarse.extrapolated(offsets, OFFSET_RATIO)
     if offset != offsets[0]:
         description += ", its offset extrapolated"
     return _Start(problem.top_height - offset, solution.depth_slope, solution.slope_error,
                   pressure, description, lowest=False, coarse_offsets=offsets)
-
-
-def _extrapolated(offsets):
-    """The fine grid's offset from the levels' below it, finest first (:data:`OFFSET_RATIO`).
-
-    ``offsets[0]`` itself unless there are two, or if three give two steps that
-    do not shrink in the same direction (then the levels say nothing of the next
-    step)."""
-    if len(offsets) < 2:
-        return offsets[0]
-    last = offsets[0] - offsets[1]
-    if len(offsets) > 2:
-        below = offsets[1] - offsets[2]
-        if last * below <= 0 or abs(below) <= abs(last):
-            return offsets[0]
-    return offsets[0] + last / OFFSET_RATIO

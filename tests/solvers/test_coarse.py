@@ -335,3 +335,17 @@ def test_a_coarse_tolerance_that_is_not_positive_is_refused(comm, value):
     with pytest.raises(ValueError, match=r"coarse_tolerance = .* is not allowed: the tolerance "
                                          r"of the coarse start's solves is a positive number"):
         polonsky_keer(problem, Load(0.02 * problem.pressure_scale), SolverSettings(coarse_tolerance=value))
+
+
+@pytest.mark.parametrize("ratio", [3.0, 4.0])
+def test_a_level_quantity_is_extrapolated_over_the_ratio_of_its_steps(ratio):
+    """Steps shrinking by the ratio are continued exactly; steps that do not shrink,
+    or change sign, say nothing of the next one; two levels take the ratio as given."""
+    step = 0.01   # the last step; the one below it ratio times larger
+    values = [1.0, 1.0 + step, 1.0 + step + ratio * step]   # finest first
+    expected = pytest.approx(1.0 - step / ratio, rel=0, abs=1e-15)
+    assert coarse_module.extrapolated(values, ratio) == expected
+    assert coarse_module.extrapolated(values[:2], ratio) == expected
+    assert coarse_module.extrapolated([1.0, 1.01, 1.015], ratio) == 1.0   # below is smaller
+    assert coarse_module.extrapolated([1.0, 1.01, 1.0], ratio) == 1.0     # sign changes
+    assert coarse_module.extrapolated([1.0], ratio) == 1.0

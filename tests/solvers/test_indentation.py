@@ -8,8 +8,7 @@ import petgap
 from petgap.mechanics.free_half_space import FreeHalfSpace
 from petgap.parallel.grid import Grid
 from petgap.solvers import indentation
-from petgap.solvers.indentation import DepthForMeanGap, _coarse_depth, _extrapolated, \
-    measured_slope
+from petgap.solvers.indentation import DepthForMeanGap, _coarse_depth, measured_slope
 from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.indenters import indenter
 
@@ -46,19 +45,6 @@ def test_a_secant_through_unsettled_reads_keeps_a_measured_slope():
     assert _second_move_slope(0.03, residual=0.3) == 0.5
     assert _second_move_slope(1.0, residual=0.3) == pytest.approx(0.3)
     assert _second_move_slope(0.03, residual=1e-5) == pytest.approx(0.3)
-
-
-def test_the_offset_is_extrapolated_over_the_ratio_of_the_levels_steps():
-    """Steps shrinking by OFFSET_RATIO are continued exactly; steps that do not shrink,
-    or change sign, say nothing of the next one; two levels take the ratio as given."""
-    r = indentation.OFFSET_RATIO
-    step = 0.01   # the last step; the one below it r times larger
-    offsets = [1.0, 1.0 + step, 1.0 + step + r * step]   # finest first
-    assert _extrapolated(offsets) == pytest.approx(1.0 - step / r, rel=0, abs=1e-15)
-    assert _extrapolated(offsets[:2]) == pytest.approx(1.0 - step / r, rel=0, abs=1e-15)
-    assert _extrapolated([1.0, 1.01, 1.015]) == 1.0    # the step below is smaller
-    assert _extrapolated([1.0, 1.01, 1.0]) == 1.0      # the steps change sign
-    assert _extrapolated([1.0]) == 1.0
 
 
 def test_the_measured_slope_of_a_sphere_is_hertz_over_the_map(comm):

@@ -122,3 +122,40 @@ def test_a_settled_read_is_trusted_beyond_its_residual():
         return rule.slope
     assert second_slope(settled=False) == 0.5
     assert second_slope(settled=True) == pytest.approx(0.3)
+
+
+def test_the_fine_solve_starts_from_the_levels_cell_target_extrapolated(comm, monkeypatch):
+    """The cell target that puts a level's map at the mean gap converges at second order
+    with the grid; continued from the two levels below over TARGET_RATIO, it starts the
+    512^2 map's fine solve at least four times nearer its final target than the level
+    below's own target (27 times here)."""
+    problem, target = _adhesive_map(comm, 512, 32.0, 0.15, 4.0)
+    rules, init = [], MapMeanGap.__init__
+
+    def kept(rule, *args, **kwargs):
+        init(rule, *args, **kwargs)
+        rules.append((rule, rule.cell_target))
+    monkeypatch.setattr(MapMeanGap, "__init__", kept)
+    s = petgap.solve(problem, petgap.MeanGap(target))
+    assert s.converged and abs(s.mean_gap - target) <= 1e-8 * problem.gap_scale
+    final = s.cell_solution.map_rule.cell_target
+    (level, _), (_, start) = rules[-2:]
+    assert len(level.levels) == 2
+    assert abs(start - final) <= abs(level.levels[0] - final) / 4
+
+
+def test_a_settled_read_moves_once_the_residual_is_below_the_moves_own_rise():
+    """The rule moves at a residual of 5e-4 (not below 3 times the error of 1e-5) where the
+    read did not change over the iteration before and a move would raise the residual to
+    ``jump`` times the error, 1e-3; not where the read still moves, where the residual is
+    above EARLY_RESIDUAL, or without a jump."""
+    def moves(second_read, residual, jump):
+        rule = _Reads([1.0 - 1e-5, second_read], jump=jump)
+        g = np.ones(3)
+        assert rule(g, residual) is None       # no read before it: not known to settle
+        return rule(g, residual) is not None
+    assert moves(1.0 - 1e-5, 5e-4, jump=100.0)
+    assert not moves(1.0 - 2e-5, 5e-4, jump=100.0)            # the read moved
+    assert not moves(1.0 - 1e-5, 2e-3, jump=1000.0)           # above EARLY_RESIDUAL
+    assert not moves(1.0 - 1e-5, 5e-4, jump=0.0)
+    assert _Reads([1.0 - 1e-5])(np.ones(3), 2e-5) is not None   # the forcing rule
