@@ -292,6 +292,19 @@ def test_padded_cell_is_the_free_map(comm):
                                            rel=1e-10)
 
 
+def test_the_padded_cells_energy_is_half_the_work_of_its_pressure(comm):
+    """The padded cell's energies, summed over the spectrum in blocks of the Fourier slab
+    (several on a 512^2 cell), are ``(1/2) dx dy sum p u`` summed in real space."""
+    cell = Grid((512, 512), comm=comm, planner="estimate", wisdom=False)
+    body = PaddedCellHalfSpace(cell, 2.0)
+    u = np.random.default_rng(cell.x_slice.start).standard_normal(cell.local_shape)
+    u -= cell.mean(u)
+    p = body.pressure(u)
+    work = 0.5 * cell.pixel_area * comm.allreduce(float(np.sum(p * u)))
+    assert body.energy(u) == pytest.approx(work, rel=1e-12)
+    assert body.complementary_energy(p) == pytest.approx(work, rel=1e-10)
+
+
 def _adhesive_sphere(comm, n, body):
     grid = Grid((n, n), comm=comm, planner="estimate", wisdom=False)
     half_space = FreeHalfSpace(grid) if body == "free" else petgap.ElasticHalfSpace(grid)
