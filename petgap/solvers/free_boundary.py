@@ -351,7 +351,7 @@ def map_mean_gap(on_cell, map_shape, target, guess, settings, *, slope=1.0, slop
                 (rule.slope, mean), rule.slope_error = measured, SLOPE_SPREAD
         # the level stopped at the coarse tolerance, its map's mean gap up to that far off
         # the target: the level above starts from the cell target that removes the rest,
-        # extrapolated with the levels' below it
+        # extrapolated with the levels below it
         if mean is None:
             mean = rule.map_mean(solution.gap)     # reduced: NaN on every rank or none
         if np.isfinite(mean):

@@ -137,9 +137,10 @@ def solve_mean_gap_by_indentation(problem, control, settings=SolverSettings(), *
     A cold solve starts from the coarse start's grids (:mod:`petgap.solvers.coarse`,
     the topography block-averaged), each solving the same mean gap by this function
     to :data:`LEVEL_TOLERANCE`: the depth is where the last levels put the rigid
-    surface, extrapolated to the fine grid (:func:`~petgap.solvers.coarse.extrapolated`), the slope is the
-    one measured on the level :data:`SLOPE_LEVEL` times coarser
-    (:func:`measured_slope`), and the pressure the first coarse level's, prolonged.
+    surface, extrapolated to the fine grid (:data:`OFFSET_RATIO`,
+    :func:`~petgap.solvers.coarse.extrapolated`), the slope is the one measured on the
+    level :data:`SLOPE_LEVEL` times coarser (:func:`measured_slope`), and the pressure
+    the first coarse level's, prolonged.
     Without a coarse grid (or a cold start asked off) it starts from the rigid
     estimate ``u = 0`` (a depth below the answer, since ``u >= 0`` under
     compression) with the rigid slope.  Converged when the KKT residual and
@@ -247,9 +248,9 @@ def _coarse_depth(problem, control, settings, depth, slope_side=0):
     ``offset = max(h) - depth``, which the block means keep, not its depth below the
     highest point, which they lower;
     where the coarse level had a coarse level of its own, the offset is
-    extrapolated from the levels below (:func:`~petgap.solvers.coarse.extrapolated`).  Where there is no coarse
-    grid, or the coarse solve failed or found the surfaces apart, the rigid
-    estimate ``depth`` with slope 1 and no pressure.  Collective.
+    extrapolated from the levels below (:func:`~petgap.solvers.coarse.extrapolated`).
+    Where there is no coarse grid, or the coarse solve failed or found the surfaces
+    apart, the rigid estimate ``depth`` with slope 1 and no pressure.  Collective.
     """
     coarse_problem = coarse.coarse_problem(problem)
     if coarse_problem is None:
