@@ -253,8 +253,9 @@ class MapMeanGap:
         """Carry ``g`` along the last move's response, scaled to ``step`` (in place).
 
         Why: the projection's uniform shift of the free points loads every contact
-        edge like a crack tip, and the residual rises to about ten times the step over
-        ``h0``; the state's own response to the last move, the difference of the gaps
+        edge like a crack tip, and the residual rises by about :data:`SHIFT_JUMP` times
+        the step over ``h0' a0``, tens of times the step over ``h0``; the state's
+        own response to the last move, the difference of the gaps
         before the two moves, is a secant predictor of the whole state, and the
         residual barely rises.  Points at the wall stay there: a move that turns back
         (the usual second move, which takes back the first one's overshoot) would
