@@ -335,10 +335,9 @@ def map_mean_gap(on_cell, map_shape, target, guess, settings, *, slope=1.0, slop
         if found and initial_gap is not None:
             guess = coarse.extrapolated(found[0].levels, TARGET_RATIO)
             slope, slope_error = found[0].slope, found[0].slope_error
-    edge = on_cell.pressure_scale * cell.dx / on_cell.half_space.contact_modulus  # h0' a0
+    jump = SHIFT_JUMP * on_cell.gap_scale / (on_cell.rms_slope * cell.dx)   # h0 / (h0' a0)
     rule = MapMeanGap(cell, map_shape, target, on_cell.gap_scale, settings.tolerance, guess,
-                      slope, slope_error, jump=SHIFT_JUMP * on_cell.gap_scale / edge, log=log,
-                      bound=settings.max_iterations)
+                      slope, slope_error, jump=jump, log=log, bound=settings.max_iterations)
     solution = gap_cg(on_cell, MeanGap(guess), settings, initial_gap=initial_gap,
                       monitor=monitor, retarget=rule)
     rule.before = None  # the predictor's field: not kept with the solution
