@@ -27,6 +27,7 @@ from petgap.io.scene import schema_default
 from petgap.mechanics import plausibility
 from petgap.mechanics.problem import Indentation, Load, MeanGap
 from petgap.parallel.collective import root_decides
+from petgap.solvers import gap_cg
 from petgap.solvers.convergence import ResidualTrend
 from petgap.surfaces.measured import length_unit
 from petgap.parallel.log import configured, get_logger
@@ -518,6 +519,11 @@ def _log_solution(log, step, solution):
     if not solution.converged:
         log.warning("step %d did not converge: %s; stored with converged = False",
                     step.index, solution.reason)
+    if solution.reason == "stalled":
+        log.warning("step %d: the KKT residual stopped falling at %.2e, above the tolerance "
+                    "(%d iterations without a tenth off its best); ask for a tolerance above "
+                    "it", step.index, max(solution.kkt_pressure, solution.kkt_gap),
+                    gap_cg.STALL_ITERATIONS)
     if solution.reason == "stalled_round_off":
         log.warning("step %d: the KKT residual stopped falling at %.2e, above the tolerance, "
                     "where round-off decides the steps; ask for a tolerance above it, or "

@@ -51,7 +51,11 @@ more where the coarse term forms its contact springs again
 
 Convergence: the largest ``|grad + P0|`` over ``F`` relative to ``h0' E*``
 (:meth:`petgap.mechanics.problem.ContactProblem.kkt_residuals`), judged on a
-freshly evaluated ``p_el``.
+freshly evaluated ``p_el``.  A solve within a hundred times its tolerance (or at
+round-off) whose residual has not fallen by a tenth of its best for
+:data:`STALL_ITERATIONS` iterations stops, unconverged, as ``"stalled"``: below
+round-off, or on a sticky state so nearly singular that its residual creeps,
+more iterations do not reach the tolerance.
 
 Memory: the fields ``g``, ``p_el``, ``t`` and ``v'`` besides the FFT buffer (and
 the last residual with ``two_level``); a
@@ -83,6 +87,18 @@ KEEP_FRACTION = 1.0
 POLAK_RIBIERE = True
 #: Iterations a load-controlled solve stays past pull-off before it says so (:func:`_pulled_off`).
 PULL_OFF_ITERATIONS = 3
+#: A solve stops as ``"stalled"`` when its residual, once its best is within
+#: ``STALL_NEAR`` times the tolerance or below ``ROUND_OFF``, has not fallen below
+#: ``STALL_FACTOR`` times that best for ``STALL_ITERATIONS`` iterations (:func:`_stalled`).
+#: Near the tolerance a healthy solve beats its best within a few iterations; one that
+#: sits for fifty has met a floor (round-off, or a near-singular sticky state whose
+#: residual creeps) and would otherwise run on to its iteration limit.  Far from it a
+#: state may wander for a hundred iterations and more on its way (a jump into full
+#: contact), which is no stall.
+STALL_ITERATIONS = 50
+STALL_FACTOR = 0.9
+STALL_NEAR = 100.0
+ROUND_OFF = 1e-12
 
 
 def _pass(kernel, *args):
@@ -164,6 +180,8 @@ class _State:
     capped: int = 0           # steps capped at the law's length scale
     apart: int = 0            # consecutive iterations past pull-off (_pulled_off)
     cross: tuple = ()         # with two_level: sum_F z r_old, sum_F r_old, sum_F t (_beta)
+    best: float = np.inf      # the lowest residual so far, and its iteration (_stalled)
+    best_at: int = 0
 
 
 def _project_mean(grid, g, target, h, padded, comm, positive=None):
@@ -504,6 +522,18 @@ def _control(problem, control):
     raise TypeError(f"unknown control {control!r}")
 
 
+def _stalled(s, it, residual, tolerance):
+    """Whether the residual has stopped falling near the tolerance (:data:`STALL_ITERATIONS`).
+
+    The same on every rank: the residual is a global maximum.
+    """
+    if residual < STALL_FACTOR * s.best:
+        s.best, s.best_at = residual, it
+        return False
+    near = s.best <= max(STALL_NEAR * tolerance, ROUND_OFF)
+    return near and it - s.best_at >= STALL_ITERATIONS
+
+
 def _retargeted(f, s, retarget, residual):
     """Whether ``retarget`` moved the mean-gap constraint; if so, ``g`` is on the new one.
 
@@ -521,6 +551,7 @@ def _retargeted(f, s, retarget, residual):
     _project_mean(f.grid, f.g, f.target, f.h, f.padded, f.comm)
     f.fresh_pressure()
     s.fresh, s.since_fresh, s.beta_ok = True, 0, False
+    s.best = np.inf   # a new constraint: its residual starts afresh
     return True
 
 
@@ -592,6 +623,9 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
             continue
         if verdict:
             converged, reason = verdict == "converged_kkt", verdict
+            break
+        if _stalled(s, it, residual, tolerance):
+            reason = "stalled"
             break
         if _pulled_off(f, s):
             reason = "load_not_reached"  # every contact let go: beyond pull-off

@@ -649,6 +649,29 @@ def test_sticky_surface_ends_with_a_verdict(comm):
     assert abs(states[2].mean_pressure - loads[2]) > 1e-3 * problem.pressure_scale
 
 
+@pytest.mark.parametrize("control", ["mean-gap", "load"])
+def test_a_gap_solve_that_stops_improving_says_so(comm, control):
+    """A gap solve asked for a tolerance below round-off stops as ``stalled`` once its
+    residual has not fallen by a tenth of its best for the stall window, unconverged,
+    instead of running to its iteration limit; the same verdict on every rank."""
+    from petgap.solvers import gap_cg  # deferred: the window is read from it
+    grid = make_grid((64, 64), comm)
+    problem = rough_problem(grid, ExponentialAdhesion(0.05 * E_STAR * grid.dx, 2 * grid.dx))
+    target = (MeanGap(solve(problem.with_interaction(None), Load(0.02 * problem.pressure_scale)
+                            ).mean_gap) if control == "mean-gap"
+              else Load(0.02 * problem.pressure_scale))
+    residuals = []
+    solution = solve(problem, target, tolerance=1e-300, max_iterations=2000,
+                     monitor=lambda it, residual: residuals.append(residual))
+    assert not solution.converged and solution.reason == "stalled"
+    assert solution.iterations < 2000
+    window = gap_cg.STALL_ITERATIONS
+    assert min(residuals[-window:]) > gap_cg.STALL_FACTOR * min(residuals[:-window])
+    assert max(solution.kkt_pressure, solution.kkt_gap) < 1e-12
+    verdicts = comm.allgather((solution.reason, solution.iterations))
+    assert all(v == verdicts[0] for v in verdicts)
+
+
 def test_unresolved_sticky_contact_reports_non_convexity(comm):
     """A short range (rho = a0 / 4, process zone 1.25 a0, 1/kappa_att ~ 10): non-convex steps.
 
