@@ -57,3 +57,32 @@ def test_iterations_count_on_through_the_levels_and_the_sweep_has_its_eta(monkey
 
 def test_a_step_ending_now_says_so():
     assert _duration(0.2) == "under 1 s"
+
+
+def test_a_stalled_step_is_logged_with_the_residual_it_reached():
+    """A step whose gap solve stalled near its tolerance is logged as not converged, with
+    the residual it reached, the stall window and what to do."""
+    from types import SimpleNamespace
+    from petgap.app import run
+    from petgap.solvers import gap_cg
+
+    class Log:
+        def __init__(self):
+            self.warnings = []
+
+        def info(self, *args):
+            pass
+
+        def warning(self, text, *args):
+            self.warnings.append(text % args)
+
+    solution = SimpleNamespace(converged=False, reason="stalled", iterations=80,
+                               operator_applications=200.0, wall_time=1.0,
+                               contact_fraction=0.1, mean_gap=1.0, mean_pressure=0.0,
+                               kkt_pressure=1.4e-8, kkt_gap=0.0, jump=False, start="")
+    log = Log()
+    run._log_solution(log, SimpleNamespace(index=3), solution)
+    assert any("step 3 did not converge: stalled" in w for w in log.warnings)
+    assert any("stopped falling at 1.40e-08" in w
+               and f"{gap_cg.STALL_ITERATIONS} iterations" in w
+               and "tolerance above it" in w for w in log.warnings)
