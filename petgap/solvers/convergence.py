@@ -70,6 +70,22 @@ class Timer:
         return time.perf_counter() - self.start
 
 
+class BestResidual:
+    """The lowest residual of a solve and the iteration it came at, what the solvers'
+    stall rules count from: a residual is better only below ``factor`` times the best,
+    so that a residual wandering at its floor does not keep renewing it."""
+
+    def __init__(self, factor):
+        self.factor = float(factor)
+        self.value, self.at = np.inf, 0
+
+    def since(self, iteration, residual):
+        """Record ``residual`` at ``iteration``; the iterations since the best (0 if it is)."""
+        if residual < self.factor * self.value:
+            self.value, self.at = residual, iteration
+        return iteration - self.at
+
+
 class ResidualTrend:
     """When will the residual reach the tolerance?  An estimate from its decay so far.
 

@@ -63,7 +63,7 @@ law whose ``v''`` is not a multiple of its ``v'`` (Lennard-Jones, the squared
 exponential) adds one field for ``v''``, filled in the same pass as ``v'``, so
 that the direction pass needs no transcendental function of its own.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from mpi4py import MPI
@@ -73,7 +73,7 @@ from petgap.mechanics.problem import Load, MeanGap
 from petgap.parallel.collective import global_sums
 from petgap.parallel.log import GAP_CG_EVENT, event
 from petgap.solvers import _kernels as _k
-from petgap.solvers.convergence import Timer, judge
+from petgap.solvers.convergence import BestResidual, Timer, judge
 from petgap.solvers.gap_start import cold_start
 from petgap.solvers.gap_two_level import CoarseTerm, block_for
 from petgap.solvers.settings import SolverSettings
@@ -180,8 +180,7 @@ class _State:
     capped: int = 0           # steps capped at the law's length scale
     apart: int = 0            # consecutive iterations past pull-off (_pulled_off)
     cross: tuple = ()         # with two_level: sum_F z r_old, sum_F r_old, sum_F t (_beta)
-    best: float = np.inf      # the lowest residual so far, and its iteration (_stalled)
-    best_at: int = 0
+    best: BestResidual = field(default_factory=lambda: BestResidual(STALL_FACTOR))  # _stalled
 
 
 def _project_mean(grid, g, target, h, padded, comm, positive=None):
@@ -527,11 +526,9 @@ def _stalled(s, it, residual, tolerance):
 
     The same on every rank: the residual is a global maximum.
     """
-    if residual < STALL_FACTOR * s.best:
-        s.best, s.best_at = residual, it
-        return False
-    near = s.best <= max(STALL_NEAR * tolerance, ROUND_OFF)
-    return near and it - s.best_at >= STALL_ITERATIONS
+    since = s.best.since(it, residual)
+    near = s.best.value <= max(STALL_NEAR * tolerance, ROUND_OFF)
+    return near and since >= STALL_ITERATIONS
 
 
 def _retargeted(f, s, retarget, residual):
@@ -551,7 +548,7 @@ def _retargeted(f, s, retarget, residual):
     _project_mean(f.grid, f.g, f.target, f.h, f.padded, f.comm)
     f.fresh_pressure()
     s.fresh, s.since_fresh, s.beta_ok = True, 0, False
-    s.best = np.inf   # a new constraint: its residual starts afresh
+    s.best = BestResidual(STALL_FACTOR)   # a new constraint: its residual starts afresh
     return True
 
 

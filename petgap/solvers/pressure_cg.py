@@ -116,7 +116,7 @@ from petgap.parallel.log import GAP_PASS_EVENT, SET_UPDATE_EVENT, event
 from petgap.solvers import _contact_set as _cs
 from petgap.solvers.contact_limits import touching_state
 from petgap.solvers.contact_set import INDEX
-from petgap.solvers.convergence import Timer, judge
+from petgap.solvers.convergence import BestResidual, Timer, judge
 from petgap.solvers.preconditioners import StepTransforms, make_preconditioner
 from petgap.solvers.pressure_start import choose_start
 from petgap.solvers.settings import SolverSettings
@@ -228,7 +228,7 @@ class PressureCG:
         self.fresh, self.since_fresh = True, 0
         self.history = []
         self.converged, self.reason, self.it = False, "max_iterations", 0
-        self.best, self.best_it = np.inf, 0
+        self.best = BestResidual(STALL_FACTOR)
         self.retarget = retarget   # polonsky_keer's, or None
         self.punch_scale = None    # move_depth's, found at the first move
         self._u = None
@@ -391,10 +391,7 @@ class PressureCG:
         """A single-precision solve whose residual wanders at its round-off floor."""
         if self.dtype != np.float32:
             return False
-        if residual < STALL_FACTOR * self.best:
-            self.best, self.best_it = residual, self.it
-            return False
-        return self.it - self.best_it >= STALL_ITERATIONS
+        return self.best.since(self.it, residual) >= STALL_ITERATIONS
 
     def _admit_overlap(self):
         """Let the points where the surfaces overlap into ``S``, at their overlap's pressure.

@@ -24,7 +24,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from petgap.io.solver_registry import PETGAP_TYPES
-from petgap.solvers.convergence import Timer
+from petgap.solvers.convergence import BestResidual, Timer
 from petgap.solvers.gap_cg import gap_cg
 from petgap.solvers.pressure_cg import polonsky_keer
 
@@ -212,7 +212,7 @@ class _GapCallbacks:
         self.comm = scaled.problem.grid.comm
         self.tolerance, self.monitor = tolerance, monitor
         self.residual, self.key = None, None
-        self.best, self.best_at, self.stalled = np.inf, 0, False
+        self.best, self.stalled = BestResidual(TAO_STALL_FACTOR), False
 
     @staticmethod
     def fingerprint(xa):
@@ -249,10 +249,8 @@ class _GapCallbacks:
 
     def _stalls(self, it, residual):
         """Whether the residual has stopped falling (:data:`TAO_STALL_ITERATIONS`)."""
-        if residual < TAO_STALL_FACTOR * self.best:
-            self.best, self.best_at = residual, it
-            return False
-        return it - self.best_at >= max(TAO_STALL_ITERATIONS, 2 * self.best_at)
+        since = self.best.since(it, residual)
+        return since >= max(TAO_STALL_ITERATIONS, 2 * self.best.at)
 
     def update_hessian(self, tao, xv, H, P):
         H.getPythonContext().set_point(xv.getArray(readonly=True).reshape(self.shape))

@@ -1,9 +1,10 @@
-"""The time-to-go estimate of a solve from its residual's decay."""
+"""The time-to-go estimate of a solve from its residual's decay, and the best residual the
+solvers' stall rules count from."""
 import math
 
 import pytest
 
-from petgap.solvers.convergence import ResidualTrend
+from petgap.solvers.convergence import BestResidual, ResidualTrend
 
 
 def test_geometric_decay_is_extrapolated_exactly():
@@ -34,3 +35,13 @@ def test_only_the_recent_window_counts():
     # the window holds k = 15..19 only: log10 r = -2.5 - (t - 15) reaches -9 at t = 21.5
     assert trend.remaining() == pytest.approx(2.5, rel=1e-9)
     assert trend.times == [15.0, 16.0, 17.0, 18.0, 19.0]
+
+
+def test_the_best_residual_counts_only_a_tenth_off():
+    """The stall rules' count: a residual is the new best only below ``factor`` times the
+    best, so that one wandering at its floor does not renew it."""
+    best = BestResidual(0.9)
+    assert best.since(0, 1.0) == 0 and best.value == 1.0
+    assert best.since(1, 0.95) == 1 and best.value == 1.0     # not a tenth off
+    assert best.since(2, 0.5) == 0 and best.at == 2
+    assert [best.since(i, 0.46) for i in (3, 4, 5)] == [1, 2, 3]
