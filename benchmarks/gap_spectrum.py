@@ -26,7 +26,7 @@ largest, the Ritz vector is formed and two shares of its squared norm are given:
 on waves longer than eight coarse cells ("long"), and on the points within the
 law's range of the wall, ``g < rho`` ("band").  "clipped": coarse systems that
 were indefinite and were solved with the springs clipped at zero, as the solver
-does (:meth:`petgap.solvers.gap_two_level.CoarseTerm.correct`).
+does (:meth:`petgap.solvers.gap_two_level.CoarseTerm.correction`).
 
 Usage::
 
@@ -53,6 +53,15 @@ def hat_restriction(field, block):
     lo = (cells * (1 - w)[None, :, None]).sum(1)
     hi = (cells * w[None, :, None]).sum(1)
     return (lo + np.roll(hi, 1, axis=0)) / block ** 2
+
+
+def hat_prolongation(coarse, block):
+    """``P coarse``: the coarse term's bilinear interpolation onto the fine grid (periodic)."""
+    (c0, c1), w = coarse.shape, np.arange(block) / block
+    rows = (coarse[:, None, :] * (1 - w)[None, :, None]
+            + np.roll(coarse, -1, axis=0)[:, None, :] * w[None, :, None]).reshape(c0 * block, c1)
+    return (rows[:, :, None] * (1 - w) + np.roll(rows, -1, axis=1)[:, :, None] * w).reshape(
+        c0 * block, c1 * block)
 
 
 def state(n, work, rho):
@@ -97,8 +106,7 @@ def spectrum(problem, gap, block, rho, iterations):
         buffer[:, :n1] = r
         half_space.apply_in_buffer(inverse=True)
         term.rhs, term.springs = hat_restriction(r, block), springs
-        term.correct(buffer)
-        return on_free(buffer[:, :n1])
+        return on_free(buffer[:, :n1] - hat_prolongation(term.correction(), block))
 
     def operator(t):
         return on_free(stiffness(t) + curvature * t)

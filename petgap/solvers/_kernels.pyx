@@ -91,21 +91,34 @@ def gcg_write_residual(const double[:, ::1] pel, const double[:, ::1] g,
                 real[i, j] = _free_residual(pel[i, j], g[i, j], vp[i, j], adh, lam_f, lam)
 
 
-def gcg_precond_sums(const double[:, ::1] real, const double[:, ::1] pel,
+def gcg_precond_sums(double[:, ::1] real, const double[:, ::1] pel,
                      const double[:, ::1] g, const double[:, ::1] vp, bint adh,
                      double lam_f, double lam, double[:, ::1] r_old=None,
-                     const double[:, ::1] t=None):
+                     const double[:, ::1] t=None, const double[:, ::1] y=None,
+                     Py_ssize_t x0=0, Py_ssize_t b=0):
     """Returns ``(sum_F z, sum_F r z, sum_F r)`` with ``z = real``, ``r = grad + lam``.
 
     With ``r_old`` (and ``t``) also ``(sum_F z r_old, sum_F r_old, sum_F t)``, and
     then ``r_old = r`` on F and 0 elsewhere: the Polak-Ribiere term and the old
-    direction's mean over F of :func:`petgap.solvers.gap_cg._beta`.
+    direction's mean over F of :func:`petgap.solvers.gap_cg._beta`.  With ``y`` (a
+    coarse field, whole on every rank; ``x0`` this rank's first row, ``b`` the coarse
+    cell's side) ``real -= P y`` first, in the same pass: the coarse term's correction
+    (:mod:`petgap.solvers.gap_two_level`, :func:`_prolonged_row`).
     """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double gr, z, sz = 0.0, srz = 0.0, sr = 0.0, szr = 0.0, so = 0.0, st = 0.0
-    cdef bint cross = r_old is not None
+    cdef bint cross = r_old is not None, coarse = y is not None
+    cdef double[::1] scratch = np.zeros(y.shape[1] if coarse else 1)
+    cdef double[::1] prolonged = np.zeros(n if coarse else 1)
+    cdef double* zrow
+    cdef double* prow = &prolonged[0]
     with nogil:
         for i in range(m):
+            if coarse:
+                _prolonged_row(y, x0 + i, b, &scratch[0], prow)
+                zrow = &real[i, 0]
+                for j in range(n):
+                    zrow[j] -= prow[j]
             for j in range(n):
                 gr = pel[i, j] + (vp[i, j] if adh else 0.0)
                 if g[i, j] > 0.0 or gr + lam_f < 0.0:
@@ -262,37 +275,72 @@ def copy_from(double[:, ::1] y, const double[:, ::1] x):
 # The coarse term of the gap preconditioner (petgap.solvers.gap_two_level).  Coarse
 # node ``(I, J)`` sits on fine point ``(I b, J b)``; a fine point gives its bilinear
 # hat weights to the four nodes around it (periodically).  ``x0`` is the global index
-# of this rank's first row; the coarse arrays are whole on every rank.  A row is
-# first summed onto the coarse row's nodes (weights ``1 - k / b`` and ``k / b`` at
-# offset ``k`` in a cell), which is then added to the two coarse rows around it.
+# of this rank's first row; the coarse arrays are whole on every rank.
+#
+# A restriction runs down a band of ``b`` fine rows (those of coarse row ``I``): each
+# row is added into two row-long sums, weighted ``1 - fx`` and ``fx`` for the coarse
+# rows ``I`` and ``I + 1`` -- two multiply-adds per point along contiguous memory,
+# which vectorise -- and only at the band's end (or the slab's) are the two sums
+# folded along the row onto the coarse nodes.  Folding every fine row instead costs
+# a chain of dependent additions per point, which made the residual's pass the
+# dearest of an iteration.
 
-cdef inline void _row_to_coarse(const double* row, double[:, ::1] out, Py_ssize_t gi,
-                                Py_ssize_t b, const double* w, double* acc) noexcept nogil:
-    """``out += hat-weighted sums of one fine row (global index gi)``.
+cdef class _Band:
+    """The two row-long sums of one restriction (above) and their fold onto ``out``."""
+    cdef double[::1] lo, hi, acc, w
+    cdef Py_ssize_t b, n, band
 
-    ``w[k] = k / b`` (the weights, computed once per pass rather than divided out
-    per point); ``acc`` is scratch of the coarse row's length.
-    """
-    cdef Py_ssize_t ncx = out.shape[0], ncy = out.shape[1], J, J1, k, I, I1
-    cdef double lo, hi, v, fx
-    for J in range(ncy):
-        acc[J] = 0.0
-    for J in range(ncy):
-        lo = 0.0
-        hi = 0.0
-        for k in range(b):
-            v = row[J * b + k]
-            lo += v - w[k] * v
-            hi += w[k] * v
-        J1 = J + 1 if J + 1 < ncy else 0
-        acc[J] += lo
-        acc[J1] += hi
-    I = gi // b
-    I1 = I + 1 if I + 1 < ncx else 0
-    fx = <double>(gi - I * b) / b
-    for J in range(ncy):
-        out[I, J] += (1.0 - fx) * acc[J]
-        out[I1, J] += fx * acc[J]
+    def __cinit__(self, Py_ssize_t n, Py_ssize_t ncy, Py_ssize_t b):
+        self.lo = np.zeros(n)
+        self.hi = np.zeros(n)
+        self.acc = np.zeros(ncy)
+        self.w = np.arange(b) / <double>b
+        self.b, self.n, self.band = b, n, -1
+
+    cdef void add(self, const double* row, double[:, ::1] out, Py_ssize_t gi) noexcept nogil:
+        """Add fine row ``gi`` (global index) to the band's sums, folding the last band first."""
+        cdef Py_ssize_t j, I = gi // self.b
+        cdef double fx = <double>(gi - I * self.b) / self.b, fl = 1.0 - fx
+        cdef double* lo = &self.lo[0]
+        cdef double* hi = &self.hi[0]
+        if I != self.band:
+            self.fold(out)
+            self.band = I
+        for j in range(self.n):
+            lo[j] += fl * row[j]
+            hi[j] += fx * row[j]
+
+    cdef void fold(self, double[:, ::1] out) noexcept nogil:
+        """``out[I] +=`` and ``out[I + 1] +=`` the hat-weighted sums of the band's two sums."""
+        if self.band < 0:
+            return
+        cdef Py_ssize_t ncx = out.shape[0], I = self.band
+        cdef Py_ssize_t I1 = I + 1 if I + 1 < ncx else 0
+        self._fold_row(&self.lo[0], out, I)
+        self._fold_row(&self.hi[0], out, I1)
+        self.band = -1
+
+    cdef void _fold_row(self, double* row, double[:, ::1] out, Py_ssize_t I) noexcept nogil:
+        """``out[I, J] +=`` the hats of ``row`` along it; ``row`` is zeroed for the next band."""
+        cdef Py_ssize_t ncy = out.shape[1], J, J1, k, b = self.b
+        cdef double lo, hi, v
+        cdef double* acc = &self.acc[0]
+        cdef double* w = &self.w[0]
+        for J in range(ncy):
+            acc[J] = 0.0
+        for J in range(ncy):
+            lo = 0.0
+            hi = 0.0
+            for k in range(b):
+                v = row[J * b + k]
+                lo += v - w[k] * v
+                hi += w[k] * v
+                row[J * b + k] = 0.0
+            J1 = J + 1 if J + 1 < ncy else 0
+            acc[J] += lo
+            acc[J1] += hi
+        for J in range(ncy):
+            out[I, J] += acc[J]
 
 
 def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const double[:, ::1] vp,
@@ -308,24 +356,49 @@ def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const doub
     the points at the wall in each coarse cell (cell ``(I, J)`` holds the pixels
     ``I b .. I b + b - 1`` by ``J b .. J b + b - 1``).
     """
-    cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
+    cdef Py_ssize_t i, j, J, m = g.shape[0], n = g.shape[1], ncy = rhs.shape[1]
+    cdef double at_wall, gr, gv
     cdef bint second = vpp is not None
     cdef double[::1] row = np.zeros(n)
-    cdef double[::1] acc = np.zeros(rhs.shape[1])
-    cdef double[::1] w = np.arange(b) / <double>b
+    cdef double[::1] wall = np.zeros(n)
+    cdef double[::1] zeros = np.zeros(n)
+    cdef double* rrow
+    cdef double* srow = &row[0]
+    cdef double* wrow = &wall[0]
+    cdef const double* grow
+    cdef const double* prow
+    cdef const double* e
+    cdef const double* c
+    cdef double scale = 1.0
+    cdef _Band residual = _Band(n, ncy, b), free = _Band(n, ncy, b)
     with nogil:
         for i in range(m):
+            # without branches in the loops, so that they vectorise: the hard wall reads
+            # zeros for v', and v'' is ``vpp`` or ``-v' / divisor``
+            rrow, grow, prow = &real[i, 0], &g[i, 0], &pel[i, 0]
+            e = &vp[i, 0] if adh else &zeros[0]
+            if second:
+                c = &vpp[i, 0]
+            else:
+                c, scale = e, -1.0 / divisor
             for j in range(n):
-                real[i, j] = _free_residual(pel[i, j], g[i, j], vp[i, j], adh, lam_f, lam)
-                if g[i, j] <= 0.0:
-                    row[j] = 0.0
-                    counts[(x0 + i) // b, j // b] += 1.0
-                elif adh:
-                    row[j] = vpp[i, j] if second else -vp[i, j] / divisor
-                else:
-                    row[j] = 0.0
-            _row_to_coarse(&real[i, 0], rhs, x0 + i, b, &w[0], &acc[0])
-            _row_to_coarse(&row[0], springs, x0 + i, b, &w[0], &acc[0])
+                gv = grow[j]
+                gr = prow[j] + e[j]
+                rrow[j] = gr + lam if (gv > 0.0 or gr + lam_f < 0.0) else 0.0
+            # the row is in cache: two more loops cost less than one that does not vectorise
+            for j in range(n):
+                wrow[j] = 1.0 if grow[j] <= 0.0 else 0.0
+            for j in range(n):
+                srow[j] = scale * c[j] if grow[j] > 0.0 else 0.0
+            for J in range(ncy):
+                at_wall = 0.0
+                for j in range(J * b, J * b + b):
+                    at_wall += wrow[j]
+                counts[(x0 + i) // b, J] += at_wall
+            residual.add(rrow, rhs, x0 + i)
+            free.add(srow, springs, x0 + i)
+        residual.fold(rhs)
+        free.fold(springs)
 
 
 def contact_indicator(const double[:, ::1] g, double[:, ::1] real):
@@ -344,34 +417,32 @@ def contact_springs(const double[:, ::1] g, double[:, ::1] real, Py_ssize_t x0,
     ``real`` is left holding ``1_C real`` (the FFT buffer, read once).
     """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
-    cdef double[::1] acc = np.zeros(springs.shape[1])
-    cdef double[::1] w = np.arange(b) / <double>b
+    cdef _Band band = _Band(n, springs.shape[1], b)
     with nogil:
         for i in range(m):
             for j in range(n):
                 if g[i, j] > 0.0:
                     real[i, j] = 0.0
-            _row_to_coarse(&real[i, 0], springs, x0 + i, b, &w[0], &acc[0])
+            band.add(&real[i, 0], springs, x0 + i)
+        band.fold(springs)
 
 
-def coarse_subtract(double[:, ::1] real, Py_ssize_t ny, const double[:, ::1] y,
-                    Py_ssize_t x0, Py_ssize_t b):
-    """``real -= P y`` on the first ``ny`` columns, ``P`` the bilinear prolongation."""
-    cdef Py_ssize_t i, k, J, J1, m = real.shape[0], ncx = y.shape[0], ncy = y.shape[1]
-    cdef Py_ssize_t gi, I, I1
-    cdef double fx, a, d
-    cdef double[::1] c = np.zeros(ncy)
-    with nogil:
-        for i in range(m):
-            gi = x0 + i
-            I = gi // b
-            I1 = I + 1 if I + 1 < ncx else 0
-            fx = <double>(gi - I * b) / b
-            for J in range(ncy):
-                c[J] = (1.0 - fx) * y[I, J] + fx * y[I1, J]
-            for J in range(ncy):
-                J1 = J + 1 if J + 1 < ncy else 0
-                a = c[J]
-                d = c[J1] - a
-                for k in range(b):
-                    real[i, J * b + k] -= a + (<double>k / b) * d
+cdef void _prolonged_row(const double[:, ::1] y, Py_ssize_t gi, Py_ssize_t b, double* c,
+                         double* out) noexcept nogil:
+    """``out`` = fine row ``gi`` (global index) of ``P y``, ``P`` the bilinear prolongation.
+
+    ``c`` is scratch of the coarse row's length: the row is first interpolated between the
+    two coarse rows around it, then along itself.
+    """
+    cdef Py_ssize_t ncx = y.shape[0], ncy = y.shape[1], k, J, J1
+    cdef Py_ssize_t I = gi // b
+    cdef Py_ssize_t I1 = I + 1 if I + 1 < ncx else 0
+    cdef double fx = <double>(gi - I * b) / b, a, d
+    for J in range(ncy):
+        c[J] = (1.0 - fx) * y[I, J] + fx * y[I1, J]
+    for J in range(ncy):
+        J1 = J + 1 if J + 1 < ncy else 0
+        a = c[J]
+        d = c[J1] - a
+        for k in range(b):
+            out[J * b + k] = a + (<double>k / b) * d

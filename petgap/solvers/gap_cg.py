@@ -361,12 +361,13 @@ def _precondition(f, s):
     else:
         _pass(_k.gcg_write_residual, f.pel, f.g, f.vp, f.adhesive, s.lam_f, s.lam, f.padded)
     f.half_space.apply_in_buffer(inverse=True)
+    coarse = (None, 0, 0)
     if f.coarse is not None:
         with event(GAP_CG_EVENT):
-            f.coarse.correct(f.padded)
-    # with two_level, the sums _beta needs ride on the same pass
+            coarse = (f.coarse.correction(), f.coarse.x0, f.coarse.block)
+    # with two_level, the sums _beta needs and the coarse correction ride on the same pass
     sums = global_sums(f.comm, *_pass(_k.gcg_precond_sums, f.padded, f.pel, f.g, f.vp,
-                                      f.adhesive, s.lam_f, s.lam, f.r_old, f.t))
+                                      f.adhesive, s.lam_f, s.lam, f.r_old, f.t, *coarse))
     (sum_z, rz, sum_r), s.cross = sums[:3], sums[3:]
     if f.load:
         # z += c mean(r) on F, i.e. a shift of -c sum_r / n

@@ -61,7 +61,8 @@ compliance of the cell's longest wave, and the springs give it the stiffness
 of the contact, which no fixed guess of it has (:mod:`petgap.solvers.gap_cg`).
 
 Cost per iteration: the free set's springs and ``R r`` ride on the pass that
-writes the residual; one pass subtracts the prolongation; a transform pair of the
+writes the residual, the prolongation on the pass that sums the preconditioned
+residual; a transform pair of the
 coarse grid per coarse iteration (the coarse conjugate gradients run on the
 fields' ``rfft2``, where ``H`` is a multiplier; :func:`coarse_transforms` picks the
 library), and no transform of the fine grid
@@ -90,8 +91,13 @@ BLOCK = 16
 MAX_SIDE = 1024
 #: With fewer nodes a side the cell is too small for the term to matter.
 MIN_SIDE = 4
-#: Relative residual of the coarse system's conjugate gradients, and their limit.
-INNER_TOLERANCE = 1e-6
+#: Relative residual of the coarse system's conjugate gradients, and their limit.  The
+#: outer iteration, Polak-Ribiere+, tolerates a preconditioner that varies a little; but
+#: on a sticky state the coarse system's smallest eigenvalues belong to the nearly
+#: singular long waves the term exists for, which its conjugate gradients resolve last,
+#: so a residual much looser than this leaves them wrong and costs outer iterations
+#: (docs/design.md, the two-level preconditioner).
+INNER_TOLERANCE = 1e-4
 MAX_INNER = 500
 #: The contact's springs ``R (1_C K 1_C)`` are computed again (one transform pair of the
 #: fine grid) once the points at the wall, counted per coarse cell, have changed by more
@@ -273,8 +279,10 @@ class CoarseTerm:
             rr = rr_new
         return x
 
-    def correct(self, padded):
-        """Subtract ``P (Fc R r - H v)`` from ``K^{-1} r`` in the FFT buffer (module docstring)."""
+    def correction(self):
+        """The coarse field ``y = Fc R r - H v`` whose prolongation ``P y`` is subtracted from
+        ``K^{-1} r`` (module docstring), in the pass that sums the preconditioned residual
+        (:func:`petgap.solvers._kernels.gcg_precond_sums`)."""
         fft = self.transforms
         rhs = fft.rfft2(self.rhs)
         hr = self.root_symbol * rhs
@@ -283,5 +291,4 @@ class CoarseTerm:
             # the softening outweighs the springs on some long wave: leave it out
             self.clipped += 1
             v = self._solve(np.maximum(self.springs, 0.0), hr)
-        y = fft.irfft2(self.symbol * rhs - self.root_symbol * v, s=self.coarse_shape)
-        _k.coarse_subtract(padded, self.grid.ny, y, self.x0, self.block)
+        return fft.irfft2(self.symbol * rhs - self.root_symbol * v, s=self.coarse_shape)
