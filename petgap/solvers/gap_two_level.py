@@ -95,9 +95,9 @@ MIN_SIDE = 4
 #: outer iteration, Polak-Ribiere+, tolerates a preconditioner that varies a little; but
 #: on a sticky state the coarse system's smallest eigenvalues belong to the nearly
 #: singular long waves the term exists for, which its conjugate gradients resolve last,
-#: so a residual much looser than this leaves them wrong and costs outer iterations
-#: (docs/design.md, the two-level preconditioner).
-INNER_TOLERANCE = 1e-4
+#: and a looser residual leaves them wrong and costs outer iterations where they are
+#: dearest (docs/design.md, the two-level preconditioner).
+INNER_TOLERANCE = 1e-6
 MAX_INNER = 500
 #: The contact's springs ``R (1_C K 1_C)`` are computed again (one transform pair of the
 #: fine grid) once the points at the wall, counted per coarse cell, have changed by more
