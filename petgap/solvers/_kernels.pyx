@@ -281,9 +281,8 @@ def copy_from(double[:, ::1] y, const double[:, ::1] x):
 # row is added into two row-long sums, weighted ``1 - fx`` and ``fx`` for the coarse
 # rows ``I`` and ``I + 1`` -- two multiply-adds per point along contiguous memory,
 # which vectorise -- and only at the band's end (or the slab's) are the two sums
-# folded along the row onto the coarse nodes.  Folding every fine row instead costs
-# a chain of dependent additions per point, which made the residual's pass the
-# dearest of an iteration.
+# folded along the row onto the coarse nodes: folding every fine row instead costs a
+# chain of dependent additions per point, on top of the pass's memory traffic.
 
 cdef class _Band:
     """The two row-long sums of one restriction (above) and their fold onto ``out``."""
@@ -385,7 +384,7 @@ def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const doub
                 gv = grow[j]
                 gr = prow[j] + e[j]
                 rrow[j] = gr + lam if (gv > 0.0 or gr + lam_f < 0.0) else 0.0
-            # the row is in cache: two more loops cost less than one that does not vectorise
+            # the row is in cache: the wall flags and the softening in loops of their own
             for j in range(n):
                 wrow[j] = 1.0 if grow[j] <= 0.0 else 0.0
             for j in range(n):
