@@ -359,11 +359,9 @@ def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const doub
     cdef double at_wall, gr, gv
     cdef bint second = vpp is not None
     cdef double[::1] row = np.zeros(n)
-    cdef double[::1] wall = np.zeros(n)
     cdef double[::1] zeros = np.zeros(n)
     cdef double* rrow
     cdef double* srow = &row[0]
-    cdef double* wrow = &wall[0]
     cdef const double* grow
     cdef const double* prow
     cdef const double* e
@@ -384,15 +382,13 @@ def coarse_residual(const double[:, ::1] pel, const double[:, ::1] g, const doub
                 gv = grow[j]
                 gr = prow[j] + e[j]
                 rrow[j] = gr + lam if (gv > 0.0 or gr + lam_f < 0.0) else 0.0
-            # the row is in cache: the wall flags and the softening in loops of their own
-            for j in range(n):
-                wrow[j] = 1.0 if grow[j] <= 0.0 else 0.0
+            # the row is in cache: the softening and the wall's counts in loops of their own
             for j in range(n):
                 srow[j] = scale * c[j] if grow[j] > 0.0 else 0.0
             for J in range(ncy):
                 at_wall = 0.0
                 for j in range(J * b, J * b + b):
-                    at_wall += wrow[j]
+                    at_wall += 1.0 if grow[j] <= 0.0 else 0.0
                 counts[(x0 + i) // b, J] += at_wall
             residual.add(rrow, rhs, x0 + i)
             free.add(srow, springs, x0 + i)
