@@ -26,8 +26,12 @@ import numpy as np
 
 
 def gcg_open_sums(const double[:, ::1] pel, const double[:, ::1] g,
-                  const double[:, ::1] vp, bint adh):
-    """Returns ``(sum of grad over g > 0, count of g > 0)``: the multiplier estimate."""
+                  const double[:, ::1] vp, bint adh, double shift=0.0):
+    """Returns ``(sum of grad + shift over g > 0, count of g > 0)``: the multiplier estimate.
+
+    ``shift`` is the last estimate of the multiplier, so that the summands are
+    residuals, not gradients (:func:`petgap.solvers.gap_cg._multiplier`).
+    """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double s = 0.0
     cdef long count = 0
@@ -35,17 +39,18 @@ def gcg_open_sums(const double[:, ::1] pel, const double[:, ::1] g,
         for i in range(m):
             for j in range(n):
                 if g[i, j] > 0.0:
-                    s += pel[i, j] + (vp[i, j] if adh else 0.0)
+                    s += pel[i, j] + (vp[i, j] if adh else 0.0) + shift
                     count += 1
     return s, count
 
 
 def gcg_free_sums(const double[:, ::1] pel, const double[:, ::1] g, const double[:, ::1] vp,
-                  bint adh, double lam_f, double lam_pull=INFINITY):
-    """Returns ``(sum_F grad, count_F, max_F grad, min_F grad, strong)``.
+                  bint adh, double lam_f, double lam_pull=INFINITY, double shift=0.0):
+    """Returns ``(sum_F grad + shift, count_F, max_F grad, min_F grad, strong)``.
 
     ``strong`` counts the points at the wall with ``grad + lam_pull < 0``: those
-    pulled off it beyond ``lam_pull`` (the gap solver's strong releases).
+    pulled off it beyond ``lam_pull`` (the gap solver's strong releases).  ``shift``
+    as in :func:`gcg_open_sums`.
     """
     cdef Py_ssize_t i, j, m = g.shape[0], n = g.shape[1]
     cdef double gr, s = 0.0, gmax = -INFINITY, gmin = INFINITY
@@ -62,7 +67,7 @@ def gcg_free_sums(const double[:, ::1] pel, const double[:, ::1] g, const double
                     if gr + lam_pull < 0.0:
                         strong += 1
                 if free:
-                    s += gr
+                    s += gr + shift
                     count += 1
                     if gr > gmax:
                         gmax = gr

@@ -54,8 +54,9 @@ Convergence: the largest ``|grad + P0|`` over ``F`` relative to ``h0' E*``
 freshly evaluated ``p_el``.  A solve within a hundred times its tolerance (or at
 round-off) whose residual has not fallen by a tenth of its best for
 :data:`STALL_ITERATIONS` iterations stops, unconverged, as ``"stalled"``: below
-round-off, or on a sticky state so nearly singular that its residual creeps,
-more iterations do not reach the tolerance.
+round-off more iterations do not reach the tolerance.  The round-off is that of
+the residual itself, not of the multiplier's sums: those run over residuals
+(:func:`_multiplier`, :func:`_direction`), so it does not grow with the grid.
 
 Memory: the fields ``g``, ``p_el``, ``t`` and ``v'`` besides the FFT buffer (and
 the last residual with ``two_level``); a
@@ -91,8 +92,8 @@ PULL_OFF_ITERATIONS = 3
 #: ``STALL_NEAR`` times the tolerance or below ``ROUND_OFF``, has not fallen below
 #: ``STALL_FACTOR`` times that best for ``STALL_ITERATIONS`` iterations (:func:`_stalled`).
 #: Near the tolerance a healthy solve beats its best within a few iterations; one that
-#: sits for fifty has met a floor (round-off, or a near-singular sticky state whose
-#: residual creeps) and would otherwise run on to its iteration limit.  Far from it a
+#: sits for fifty has met the floor of round-off and would otherwise run on to its
+#: iteration limit.  Far from it a
 #: state may wander for a hundred iterations and more on its way (a jump into full
 #: contact), which is no stall.
 STALL_ITERATIONS = 50
@@ -292,14 +293,24 @@ def _multiplier(f, s, history):
     jump, which the old direction knows nothing of, as for a point released
     from the wall (:func:`_release_threshold`).  Both counts ride on the free
     set's pass and reduction.
+
+    The sums run over ``grad + P0_last`` (the last estimates), so that they add up
+    residuals, not gradients.  ``P0`` is the mean of some ``N`` gradients that all lie
+    near ``-P0``: summed as they are, the rounding of the running sum grows like
+    ``N eps |P0|``, and that error enters every residual as a constant over ``F``.
+    The mean constraint keeps the iteration from removing a constant; its
+    compliance image, a long wave in the free set's shape, pollutes every direction,
+    and a sticky solve (``|P0|`` large) then stalls at a residual that grows with the
+    grid (docs/design.md, the gap solver).  Summed as residuals, the rounding shrinks
+    with them.
     """
     comm = f.comm
     if not f.load:
         s_open, s.n_open = global_sums(comm, *_pass(_k.gcg_open_sums, f.pel, f.g, f.vp,
-                                                    f.adhesive))
-        s.lam_f = -s_open / s.n_open if s.n_open > 0 else 0.0
+                                                    f.adhesive, s.lam_f))
+        s.lam_f = s.lam_f - s_open / s.n_open if s.n_open > 0 else 0.0
     s_free, n_free, gmax, gmin, strong = _pass(_k.gcg_free_sums, f.pel, f.g, f.vp, f.adhesive,
-                                               s.lam_f, _release_threshold(f, s, history))
+                                               s.lam_f, _release_threshold(f, s, history), s.lam)
     s_free, s.n_free, crossed, strong = global_sums(comm, s_free, n_free, f.crossed, strong)
     s.beta_ok = s.beta_ok and crossed == 0
     if s.beta_ok and not f.load and s.n_free > s.n_open:
@@ -307,9 +318,10 @@ def _multiplier(f, s, history):
         s.released += not s.beta_ok
     ext = np.array([gmax, -gmin])
     comm.Allreduce(MPI.IN_PLACE, ext, op=MPI.MAX)
+    shift = s.lam
     if not f.load:
-        s.lam = -s_free / s.n_free if s.n_free > 0 else s.lam_f
-    s.lam_free = -s_free / s.n_free if s.n_free > 0 else s.lam
+        s.lam = shift - s_free / s.n_free if s.n_free > 0 else s.lam_f
+    s.lam_free = shift - s_free / s.n_free if s.n_free > 0 else s.lam
     if s.n_free > 0:
         return max(ext[0] + s.lam, ext[1] - s.lam) / f.problem.pressure_scale
     return 0.0
@@ -407,11 +419,13 @@ def _direction(f, s, zshift, beta):
     the transform gives
     (:meth:`petgap.mechanics.half_space.ElasticHalfSpace.begin_in_buffer`); the
     inverse half runs later only if ``p_el`` follows by the recurrence (a whole
-    pair where the half-space has no halves).
+    pair where the half-space has no halves).  The slope sums ``(grad + P0) t`` under
+    either control: under mean-gap control ``t`` has no mean over ``F`` and ``P0``
+    adds nothing to it, but ``grad t`` alone would be ``-P0 t`` to within the
+    residual, a sum that cancels to round-off of ``P0`` (as in :func:`_multiplier`).
     """
-    lam = s.lam if f.load else 0.0
     curv, slope, tmax = _pass(_k.gcg_direction, f.padded, f.pel, f.g, f.vp, f.vpp, f.adhesive,
-                              f.t, s.lam_f, zshift, beta, lam, f.divisor)
+                              f.t, s.lam_f, zshift, beta, s.lam, f.divisor)
     if f.half_space.splits_transforms:
         curv += f.half_space.begin_in_buffer(inverse=False)
     else:

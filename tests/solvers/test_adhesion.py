@@ -680,6 +680,24 @@ def test_a_gap_solve_that_stops_improving_says_so(comm, control):
     assert all(v == verdicts[0] for v in verdicts)
 
 
+def test_a_sticky_mean_gap_solve_converges_to_round_off(comm):
+    """A sticky mean-gap state (w = 0.5 E* a0, rho = 4 a0) converges to 1e-13.
+
+    Its multiplier ``P0`` is the mean of some 60 000 gradients that all lie near
+    ``-P0``; summed as gradients, the rounding of that mean is a constant residual over
+    the free set which the mean constraint keeps the iteration from removing, and the
+    solve stopped near 2e-12 on 1 and 2 ranks.  Summed as residuals
+    (:func:`petgap.solvers.gap_cg._multiplier`), the solve goes on to round-off."""
+    grid = make_grid((256, 256), comm)
+    problem = rough_problem(grid, ExponentialAdhesion(0.5 * E_STAR * grid.dx, 4 * grid.dx),
+                            seed=7, lambda_min_pixels=32)
+    hard = solve(problem.with_interaction(None), Load(0.02 * problem.pressure_scale))
+    solution = solve(problem, MeanGap(hard.mean_gap), tolerance=1e-13, max_iterations=400)
+    assert solution.converged, (solution.reason, solution.iterations)
+    assert solution.kkt_pressure < 1e-13
+    assert solution.mean_pressure < 0   # sticky: the mean gap is held against the adhesion
+
+
 def test_unresolved_sticky_contact_reports_non_convexity(comm):
     """A short range (rho = a0 / 4, process zone 1.25 a0, 1/kappa_att ~ 10): non-convex steps.
 
