@@ -17,21 +17,24 @@ over ``F``,
 
 is preconditioned as :func:`petgap.solvers.gap_cg._precondition` does: ``K^{-1}``
 restricted to ``F``, less the coarse term of :mod:`petgap.solvers.gap_two_level`
-with the state's springs (the contact's ``R (1_C K 1_C)`` plus ``R D``), on coarse
-cells of ``--blocks`` pixels.  Conjugate gradients on ``A x = b`` (``b`` random on
+with the state's springs (the contact's ``R (1_C K 1_C)`` plus ``R D`` scaled by
+the softening ``theta`` the term chooses from its system's smallest eigenvalue,
+:func:`petgap.solvers.gap_two_level.softening_for`), on coarse cells of ``--blocks``
+pixels.  Conjugate gradients on ``A x = b`` (``b`` random on
 ``F``) run until the preconditioned residual norm has fallen by 1e-8
 ("iterations"); the eigenvalues of their Lanczos matrix estimate the extreme
 eigenvalues of the preconditioned operator from inside.  For the smallest and the
 largest, the Ritz vector is formed and two shares of its squared norm are given:
 on waves longer than eight coarse cells ("long"), and on the points within the
 law's range of the wall, ``g < rho`` ("band").  "clipped": coarse systems that
-were indefinite and were solved with the springs clipped at zero, as the solver
-does (:meth:`petgap.solvers.gap_two_level.CoarseTerm.correction`).
+were indefinite all the same and were solved with less softening, as the solver
+does (:meth:`petgap.solvers.gap_two_level.CoarseTerm.correction`).  ``--margin -inf``
+(or any value) sets :data:`petgap.solvers.gap_two_level.MARGIN` for the run.
 
 Usage::
 
     python benchmarks/gap_spectrum.py --sizes 1024 2048 --work 0.05 0.15 0.3 0.5 \\
-        [--blocks 16] [--range 4] [--iterations 60]
+        [--blocks 8] [--range 4] [--iterations 60] [--margin 0.1]
 """
 import argparse
 
@@ -39,7 +42,8 @@ import numpy as np
 from mpi4py import MPI
 
 import petgap
-from petgap.solvers.gap_two_level import CoarseTerm
+from petgap.solvers import gap_two_level
+from petgap.solvers.gap_two_level import CoarseTerm, softening_for
 
 
 def hat_restriction(field, block):
@@ -99,13 +103,16 @@ def spectrum(problem, gap, block, rho, iterations):
 
     term = CoarseTerm(grid, half_space.contact_modulus, block)
     contact = (~free).astype(float)
-    springs = hat_restriction(contact * stiffness(contact) + curvature, block)
+    term.contact = hat_restriction(contact * stiffness(contact), block)
+    softening = hat_restriction(curvature, block)
+    term.softening = softening_for(term.smallest_eigenvalue(term.contact + softening))
+    term.springs = term.contact + term.softening * softening
 
     def precondition(r):
         r = np.where(free, r, 0.0)
         buffer[:, :n1] = r
         half_space.apply_in_buffer(inverse=True)
-        term.rhs, term.springs = hat_restriction(r, block), springs
+        term.rhs = hat_restriction(r, block)
         return on_free(buffer[:, :n1] - hat_prolongation(term.correction(), block))
 
     def operator(t):
@@ -148,7 +155,8 @@ def spectrum(problem, gap, block, rho, iterations):
                        float((x[band] ** 2).sum() / (x ** 2).sum())))
     converged = np.sqrt(rz / first) < 1e-8
     return dict(iterations=m if converged else f"> {m}", low=values[0], high=values[-1],
-                shares=shares, clipped=term.clipped, band=float(band.mean()),
+                shares=shares, clipped=term.clipped, softening=term.softening,
+                band=float(band.mean()),
                 contact=float(1 - free.mean()))
 
 
@@ -156,14 +164,16 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[1024, 2048])
     parser.add_argument("--work", type=float, nargs="+", default=[0.05, 0.15, 0.3, 0.5])
-    parser.add_argument("--blocks", type=int, nargs="+", default=[16])
+    parser.add_argument("--blocks", type=int, nargs="+", default=[gap_two_level.BLOCK])
+    parser.add_argument("--margin", type=float, default=gap_two_level.MARGIN)
     parser.add_argument("--range", type=float, default=4.0)
     parser.add_argument("--iterations", type=int, default=60)
     args = parser.parse_args()
+    gap_two_level.MARGIN = args.margin
     print("| N | w (E* a0) | solve its | contact | band | block | iterations | smallest | "
           "largest | condition number | smallest: long / band | largest: long / band | "
-          "clipped |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "theta | clipped |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for n in args.sizes:
         for work in args.work:
             problem, gap, its = state(n, work, args.range)
@@ -173,7 +183,8 @@ def main():
                 print(f"| {n}^2 | {work} | {its} | {s['contact']:.3f} | {s['band']:.3f} | "
                       f"{block} | {s['iterations']} | {s['low']:.3f} | {s['high']:.2f} | "
                       f"{s['high'] / s['low']:.1f} | {long_low:.2f} / {band_low:.2f} | "
-                      f"{long_high:.2f} / {band_high:.2f} | {s['clipped']} |", flush=True)
+                      f"{long_high:.2f} / {band_high:.2f} | {s['softening']:.2f} | {s['clipped']} |",
+                      flush=True)
 
 
 if __name__ == "__main__":

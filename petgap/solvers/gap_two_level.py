@@ -48,10 +48,24 @@ symmetric.  Where ``W >= 0`` it is positive definite: the subtracted term is
 then below ``P Fc R``, which is below ``K^{-1}``: the hats' low-pass keeps it so,
 ``tests/solvers/test_gap_two_level.py`` checks it.  ``D`` makes ``W`` negative near contact edges with
 little contact, which gives the long waves there the softening the
-interaction adds; if that makes ``I + H W H`` indefinite (a state far from
-equilibrium, where the energy itself is not convex), the coarse conjugate
-gradients meet a direction of non-positive curvature and the term is formed
-with ``W`` clipped at zero instead (counted as ``coarse_clipped``).  The coarse
+interaction adds.  On the sticky side the softening nearly cancels the springs,
+and the lumped model can put a coarse mode at or past zero stiffness where the
+true operator keeps it stiff: ``I + H W H`` then has an eigenvalue near zero,
+its inverse amplifies that mode, and the preconditioned operator gets a large
+eigenvalue (or, past zero, no positive definite term at all).  So the softening
+enters scaled, ``W = W_C + theta W_D`` (contact springs, softening), with
+``theta`` the largest value for which the system's smallest eigenvalue stays at
+least :data:`MARGIN`.  ``lambda_min`` of an affine family of symmetric matrices is
+concave in ``theta``, and ``I + H W_C H >= I``, so from one Lanczos estimate
+``mu`` of it at ``theta = 1``::
+
+    lambda_min(theta) >= 1 - theta (1 - mu),  theta = (1 - MARGIN) / (1 - mu)  if mu < MARGIN.
+
+It is estimated whenever the contact's springs are formed (below), so it
+follows the state.  A system still met with a direction of non-positive
+curvature (the estimate is from above) is solved again with ``theta`` scaled by
+:data:`BACKOFF`, and with ``W`` clipped at zero below :data:`MIN_SOFTENING`
+(either counted as ``coarse_clipped``).  The coarse
 system is solved to a relative residual of :data:`INNER_TOLERANCE`, alike on
 every rank (the coarse fields are summed over the ranks first), so the result
 does not depend on the decomposition beyond round-off.
@@ -68,7 +82,8 @@ fields' ``rfft2``, where ``H`` is a multiplier; :func:`coarse_transforms` picks 
 library), and no transform of the fine grid
 but the contact's springs.  Those are ``R (1_C K 1_C)`` itself, one transform pair
 of the fine grid, formed again only once the contact has moved by more than
-:data:`RESPRING` of its points (counted per coarse cell in the residual's pass):
+:data:`RESPRING` of its points (counted per coarse cell in the residual's pass),
+and with them the softening's scale (:data:`LANCZOS_STEPS` pairs of the coarse grid):
 in the flat middle of a solve, when the set has settled, none.  Why the contact's
 own and not an estimate from its edge: where the interface is sticky the coarse
 model sees the balance of the springs and the softening cell by cell, and an
@@ -82,10 +97,10 @@ from petgap.solvers import _kernels as _k
 
 #: Pixels between coarse nodes (the side of a coarse cell).  The springs and the
 #: softening of one patch's edge must fall into cells of their own for the coarse model to
-#: see their balance, and cells twice as large cost the sticky side a quarter more
-#: iterations; cells half as large leave the coarse system too stiff to solve in few
-#: inner iterations and made a sticky mean-gap solve slower (docs/design.md).
-BLOCK = 16
+#: see their balance: on the sticky side cells of 16 took a third more iterations
+#: (docs/design.md).  Smaller cells would make the coarse system too large to solve on
+#: every rank.
+BLOCK = 8
 #: The coarse grid has at most this many nodes a side, larger cells beyond (past
 #: 16384^2): the coarse system is solved on every rank, by transforms of the coarse grid.
 MAX_SIDE = 1024
@@ -103,6 +118,18 @@ MAX_INNER = 500
 #: fine grid) once the points at the wall, counted per coarse cell, have changed by more
 #: than this fraction of their number since they were last computed (module docstring).
 RESPRING = 0.002
+#: Smallest eigenvalue the coarse system ``I + H W H`` is kept at by the softening's scale
+#: (module docstring).  Near zero the term amplifies a mode the true operator holds stiff;
+#: 0.2 costs a sticky solve an iteration or two more than 0.1 (docs/design.md).
+MARGIN = 0.1
+#: Lanczos steps of the estimate of that eigenvalue (a fraction of one inner solve's cost).
+LANCZOS_STEPS = 40
+#: The softening's scale after a coarse system still found indefinite, and the scale below
+#: which the softening is left out (the springs clipped at zero).
+BACKOFF = 0.8
+MIN_SOFTENING = 0.3
+#: Seed of the Lanczos estimate's start (any fixed field; the same on every rank).
+LANCZOS_SEED = 20
 #: Aliases of the hats' spectrum summed a side for the coarse compliance (their
 #: weight falls like the fourth power of the alias' order).
 ALIASES = 4
@@ -137,6 +164,15 @@ def block_for(shape):
     if nx % b or ny % b or min(nx, ny) // b < MIN_SIDE:
         return 0
     return b
+
+
+def softening_for(smallest):
+    """The softening's scale ``theta`` that keeps ``I + H (W_C + theta W_D) H`` at least
+    :data:`MARGIN`, given ``smallest``, the system's smallest eigenvalue at ``theta = 1``
+    (the concavity bound of the module docstring)."""
+    if smallest >= MARGIN:
+        return 1.0
+    return (1.0 - MARGIN) / (1.0 - smallest)
 
 
 def _hat_spectrum(k, n, b):
@@ -198,6 +234,7 @@ class CoarseTerm:
         self.springs = np.zeros(self.coarse_shape)
         self.rhs = np.zeros(self.coarse_shape)
         self.contact = self.counts = None      # the contact's springs, and its counts then
+        self.softening = 1.0                   # theta of the module docstring
         self.stale = True
         self.inner_iterations = self.clipped = self.respring = 0
 
@@ -227,7 +264,9 @@ class CoarseTerm:
         _k.coarse_residual(f.pel, f.g, f.vp, f.vpp, f.adhesive, f.divisor, s.lam_f, s.lam,
                            f.padded, self.x0, self.block, local[0], local[1], local[2])
         free, self.rhs, counts = self._summed(local)
-        self.springs = free + self.contact
+        if fresh:
+            self.softening = softening_for(self.smallest_eigenvalue(self.contact + free))
+        self.springs = self.contact + self.softening * free
         if fresh:
             self.counts, self.stale = counts, False
         else:
@@ -248,6 +287,33 @@ class CoarseTerm:
         for c in self.own_mirror:
             dot -= np.vdot(np.ascontiguousarray(a[:, c]), np.ascontiguousarray(b[:, c])).real
         return float(dot)
+
+    def smallest_eigenvalue(self, springs):
+        """Lanczos estimate (from above) of the smallest eigenvalue of ``I + H W H``.
+
+        :data:`LANCZOS_STEPS` steps from a fixed random field, the same on every rank
+        (the springs are summed over the ranks first): one transform pair of the coarse
+        grid a step.
+        """
+        fft = self.transforms
+        rng = np.random.default_rng(LANCZOS_SEED)
+        x = fft.rfft2(rng.standard_normal(self.coarse_shape))
+        x /= np.sqrt(self._dot(x, x))
+        previous, off = np.zeros_like(x), 0.0
+        diagonal, offdiagonal = [], []
+        for _ in range(LANCZOS_STEPS):
+            y = x + self.root_symbol * fft.rfft2(
+                springs * fft.irfft2(self.root_symbol * x, s=self.coarse_shape))
+            a = self._dot(x, y)
+            diagonal.append(a)
+            y -= a * x + off * previous
+            off = np.sqrt(self._dot(y, y))
+            if not off > 1e-12 * abs(a) or len(diagonal) == LANCZOS_STEPS:
+                break
+            offdiagonal.append(off)
+            previous, x = x, y / off
+        tridiagonal = (np.diag(diagonal) + np.diag(offdiagonal, 1) + np.diag(offdiagonal, -1))
+        return float(np.linalg.eigvalsh(tridiagonal)[0])
 
     def _solve(self, springs, b):
         """``(I + H W H)^{-1} b`` by conjugate gradients, or None where it is not positive.
@@ -287,8 +353,14 @@ class CoarseTerm:
         rhs = fft.rfft2(self.rhs)
         hr = self.root_symbol * rhs
         v = self._solve(self.springs, hr)
-        if v is None:
-            # the softening outweighs the springs on some long wave: leave it out
+        while v is None:
+            # the softening outweighs the springs on some long wave: less of it, or none
             self.clipped += 1
-            v = self._solve(np.maximum(self.springs, 0.0), hr)
+            free = self.springs - self.contact
+            if self.softening * BACKOFF < MIN_SOFTENING:
+                v = self._solve(np.maximum(self.springs, 0.0), hr)
+                break
+            self.springs = self.contact + BACKOFF * free
+            self.softening *= BACKOFF
+            v = self._solve(self.springs, hr)
         return fft.irfft2(self.symbol * rhs - self.root_symbol * v, s=self.coarse_shape)
