@@ -93,9 +93,8 @@ PULL_OFF_ITERATIONS = 3
 #: ``STALL_FACTOR`` times that best for ``STALL_ITERATIONS`` iterations (:func:`_stalled`).
 #: Near the tolerance a healthy solve beats its best within a few iterations; one that
 #: sits for fifty has met the floor of round-off and would otherwise run on to its
-#: iteration limit.  Far from it a
-#: state may wander for a hundred iterations and more on its way (a jump into full
-#: contact), which is no stall.
+#: iteration limit.  Far from it a state may wander for a hundred iterations and more on
+#: its way (a jump into full contact), which is no stall.
 STALL_ITERATIONS = 50
 STALL_FACTOR = 0.9
 STALL_NEAR = 100.0
