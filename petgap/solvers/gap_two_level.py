@@ -97,8 +97,8 @@ from petgap.solvers import _kernels as _k
 
 #: Pixels between coarse nodes (the side of a coarse cell).  The springs and the
 #: softening of one patch's edge must fall into cells of their own for the coarse model to
-#: see their balance: on the sticky side cells of 16 took a third more iterations
-#: (docs/design.md).  Smaller cells would make the coarse system too large to solve on
+#: see their balance: on the sticky side cells of 16 took a quarter to a half more
+#: iterations (docs/design.md).  Smaller cells would make the coarse system too large to solve on
 #: every rank.
 BLOCK = 8
 #: The coarse grid has at most this many nodes a side, larger cells beyond (past
