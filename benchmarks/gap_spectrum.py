@@ -43,7 +43,7 @@ from mpi4py import MPI
 
 import petgap
 from petgap.solvers import gap_two_level
-from petgap.solvers.gap_two_level import CoarseTerm, softening_for
+from petgap.solvers.gap_two_level import CoarseTerm
 
 
 def hat_restriction(field, block):
@@ -104,9 +104,7 @@ def spectrum(problem, gap, block, rho, iterations):
     term = CoarseTerm(grid, half_space.contact_modulus, block)
     contact = (~free).astype(float)
     term.contact = hat_restriction(contact * stiffness(contact), block)
-    softening = hat_restriction(curvature, block)
-    term.softening = softening_for(term.smallest_eigenvalue(term.contact + softening))
-    term.springs = term.contact + term.softening * softening
+    term.form_springs(hat_restriction(curvature, block), estimate=True)
 
     def precondition(r):
         r = np.where(free, r, 0.0)

@@ -264,14 +264,19 @@ class CoarseTerm:
         _k.coarse_residual(f.pel, f.g, f.vp, f.vpp, f.adhesive, f.divisor, s.lam_f, s.lam,
                            f.padded, self.x0, self.block, local[0], local[1], local[2])
         free, self.rhs, counts = self._summed(local)
-        if fresh:
-            self.softening = softening_for(self.smallest_eigenvalue(self.contact + free))
-        self.springs = self.contact + self.softening * free
+        self.form_springs(free, estimate=fresh)
         if fresh:
             self.counts, self.stale = counts, False
         else:
             moved = float(np.abs(counts - self.counts).sum())
             self.stale = moved > RESPRING * float(self.counts.sum())
+
+    def form_springs(self, free, estimate):
+        """``W = W_C + theta W_D`` from the contact's springs and the free set's ``free``;
+        ``theta`` estimated afresh (:func:`softening_for`) when ``estimate``, else kept."""
+        if estimate:
+            self.softening = softening_for(self.smallest_eigenvalue(self.contact + free))
+        self.springs = self.contact + self.softening * free
 
     def _dot(self, a, b):
         """``sum a b`` of two real coarse fields given by their ``rfft2`` (Parseval, up to ``1/N``).
@@ -295,15 +300,13 @@ class CoarseTerm:
         (the springs are summed over the ranks first): one transform pair of the coarse
         grid a step.
         """
-        fft = self.transforms
         rng = np.random.default_rng(LANCZOS_SEED)
-        x = fft.rfft2(rng.standard_normal(self.coarse_shape))
+        x = self.transforms.rfft2(rng.standard_normal(self.coarse_shape))
         x /= np.sqrt(self._dot(x, x))
         previous, off = np.zeros_like(x), 0.0
         diagonal, offdiagonal = [], []
         for _ in range(LANCZOS_STEPS):
-            y = x + self.root_symbol * fft.rfft2(
-                springs * fft.irfft2(self.root_symbol * x, s=self.coarse_shape))
+            y = self._apply(springs, x)
             a = self._dot(x, y)
             diagonal.append(a)
             y -= a * x + off * previous
@@ -315,6 +318,12 @@ class CoarseTerm:
         tridiagonal = (np.diag(diagonal) + np.diag(offdiagonal, 1) + np.diag(offdiagonal, -1))
         return float(np.linalg.eigvalsh(tridiagonal)[0])
 
+    def _apply(self, springs, x):
+        """``(I + H W H) x`` on the ``rfft2`` of ``x``: one transform pair of the coarse grid."""
+        fft = self.transforms
+        return x + self.root_symbol * fft.rfft2(
+            springs * fft.irfft2(self.root_symbol * x, s=self.coarse_shape))
+
     def _solve(self, springs, b):
         """``(I + H W H)^{-1} b`` by conjugate gradients, or None where it is not positive.
 
@@ -322,15 +331,13 @@ class CoarseTerm:
         there and ``W`` one in real space, so an iteration costs one transform pair
         of the coarse grid, and inner products are Parseval's over the half plane.
         """
-        fft = self.transforms
         x = np.zeros_like(b)
         res, norm = b.copy(), float(np.sqrt(self._dot(b, b)))
         if norm == 0.0:
             return x
         d, rr = res.copy(), norm * norm
         for _ in range(MAX_INNER):
-            wd = springs * fft.irfft2(self.root_symbol * d, s=self.coarse_shape)
-            ad = d + self.root_symbol * fft.rfft2(wd)
+            ad = self._apply(springs, d)
             curvature = self._dot(d, ad)
             if not curvature > 0:
                 return None
