@@ -446,3 +446,61 @@ cdef void _prolonged_row(const double[:, ::1] y, Py_ssize_t gi, Py_ssize_t b, do
         d = c[J1] - a
         for k in range(b):
             out[J * b + k] = a + (<double>k / b) * d
+
+
+# ---------------------------------------------------------------------------
+# The coarse system's conjugate gradients (petgap.solvers.gap_two_level.CoarseTerm).  The
+# vectors are this rank's rows of a half-plane spectrum, each row standing for ``weight``
+# rows of the full plane (1 or 2: Parseval's inner products).  Three passes an iteration
+# around the transform pair, where NumPy makes eleven: the coarse system is bound by
+# memory traffic as the fine passes are.
+
+
+def coarse_cg_direction(double complex[:, ::1] d, const double complex[:, ::1] res,
+                        double beta, const double[:, ::1] root, double complex[:, ::1] out):
+    """``d = res + beta d``, and ``out = root d`` (the transform's input)."""
+    cdef Py_ssize_t i, j, m = d.shape[0], n = d.shape[1]
+    cdef double complex v
+    with nogil:
+        for i in range(m):
+            for j in range(n):
+                v = res[i, j] + beta * d[i, j]
+                d[i, j] = v
+                out[i, j] = root[i, j] * v
+
+
+def coarse_cg_image(const double complex[:, ::1] image, const double[:, ::1] scale,
+                    const double complex[:, ::1] d, double complex[:, ::1] ad,
+                    const double[::1] weight):
+    """``ad = d + scale image``; returns ``sum weight Re(conj(d) ad)``, Parseval's ``d.ad``."""
+    cdef Py_ssize_t i, j, m = d.shape[0], n = d.shape[1]
+    cdef double complex v
+    cdef double s, total = 0.0
+    with nogil:
+        for i in range(m):
+            s = 0.0
+            for j in range(n):
+                v = d[i, j] + scale[i, j] * image[i, j]
+                ad[i, j] = v
+                s += d[i, j].real * v.real + d[i, j].imag * v.imag
+            total += weight[i] * s
+    return total
+
+
+def coarse_cg_step(double complex[:, ::1] x, double complex[:, ::1] res,
+                   const double complex[:, ::1] d, const double complex[:, ::1] ad,
+                   double alpha, const double[::1] weight):
+    """``x += alpha d``, ``res -= alpha ad``; returns ``sum weight |res|^2``."""
+    cdef Py_ssize_t i, j, m = d.shape[0], n = d.shape[1]
+    cdef double complex v
+    cdef double s, total = 0.0
+    with nogil:
+        for i in range(m):
+            s = 0.0
+            for j in range(n):
+                x[i, j] = x[i, j] + alpha * d[i, j]
+                v = res[i, j] - alpha * ad[i, j]
+                res[i, j] = v
+                s += v.real * v.real + v.imag * v.imag
+            total += weight[i] * s
+    return total

@@ -66,9 +66,7 @@ follows the state.  A system still met with a direction of non-positive
 curvature (the estimate is from above) is solved again with ``theta`` scaled by
 :data:`BACKOFF`, and with ``W`` clipped at zero below :data:`MIN_SOFTENING`
 (either counted as ``coarse_clipped``).  The coarse
-system is solved to a relative residual of :data:`INNER_TOLERANCE`, alike on
-every rank (the coarse fields are summed over the ranks first), so the result
-does not depend on the decomposition beyond round-off.
+system is solved to a relative residual of :data:`INNER_TOLERANCE`.
 
 Under load control the mean mode is free; the coarse grid's mean mode gets the
 compliance of the cell's longest wave, and the springs give it the stiffness
@@ -76,11 +74,10 @@ of the contact, which no fixed guess of it has (:mod:`petgap.solvers.gap_cg`).
 
 Cost per iteration: the free set's springs and ``R r`` ride on the pass that
 writes the residual, the prolongation on the pass that sums the preconditioned
-residual; a transform pair of the
-coarse grid per coarse iteration (the coarse conjugate gradients run on the
-fields' ``rfft2``, where ``H`` is a multiplier; :func:`coarse_transforms` picks the
-library), and no transform of the fine grid
-but the contact's springs.  Those are ``R (1_C K 1_C)`` itself, one transform pair
+residual; a transform pair of the coarse grid per coarse iteration (the coarse
+conjugate gradients run on the fields' spectra, where ``H`` is a multiplier), and
+no transform of the fine grid but the contact's springs.  Those are
+``R (1_C K 1_C)`` itself, one transform pair
 of the fine grid, formed again only once the contact has moved by more than
 :data:`RESPRING` of its points (counted per coarse cell in the residual's pass),
 and with them the softening's scale (:data:`LANCZOS_STEPS` pairs of the coarse grid):
@@ -89,20 +86,35 @@ own and not an estimate from its edge: where the interface is sticky the coarse
 model sees the balance of the springs and the softening cell by cell, and an
 estimate right in sum but off by tens of per cent in a cell leaves that balance
 wrong there (``docs/design.md``, the two-level preconditioner).
+
+The coarse system lives on a grid of its own (:func:`coarse_grid`) with petgap's
+FFTW-MPI transforms, split over the fine grid's ranks: the fine slabs' sums are
+reduced onto the coarse slabs, each rank iterates on its part of the spectrum, and
+the correction is gathered whole for the prolongation.  Why not solved whole on every
+rank: it costs some forty coarse pairs per fine iteration, a fifth of a sticky
+solve's time at 8192^2 on one rank, and a copy on every rank would not get faster
+with the ranks while the fine grid's share does.  Coarse grids of at most
+:data:`WHOLE_POINTS` points (or too few rows for the ranks) are solved whole on every
+rank, with FFTW's "estimate" plans (the same arithmetic everywhere): spread over the
+ranks their transforms would cost the messages' latency and little else.  Either
+way the result does not depend on the decomposition beyond round-off.
 """
 import numpy as np
 from mpi4py import MPI
 
+from petgap.parallel.grid import DecompositionError, Grid, check_decomposition
 from petgap.solvers import _kernels as _k
+from petgap.solvers.coarse import WHOLE_POINTS
 
 #: Pixels between coarse nodes (the side of a coarse cell).  The springs and the
 #: softening of one patch's edge must fall into cells of their own for the coarse model to
 #: see their balance: on the sticky side cells of 16 took a quarter to a half more
-#: iterations (docs/design.md).  Smaller cells would make the coarse system too large to solve on
-#: every rank.
+#: iterations (docs/design.md).  Smaller cells would give the coarse system four times the
+#: nodes, and its forty-odd transform pairs per fine iteration would cost more than the fine
+#: grid's two.
 BLOCK = 8
-#: The coarse grid has at most this many nodes a side, larger cells beyond (past
-#: 16384^2): the coarse system is solved on every rank, by transforms of the coarse grid.
+#: The coarse grid has at most this many nodes a side, larger cells beyond (past 8192^2),
+#: so that its forty-odd transform pairs per fine iteration stay a fraction of the fine pair.
 MAX_SIDE = 1024
 #: With fewer nodes a side the cell is too small for the term to matter.
 MIN_SIDE = 4
@@ -128,31 +140,27 @@ LANCZOS_STEPS = 40
 #: which the softening is left out (the springs clipped at zero).
 BACKOFF = 0.8
 MIN_SOFTENING = 0.3
-#: Seed of the Lanczos estimate's start (any fixed field; the same on every rank).
+#: Seed of the Lanczos estimate's start (any fixed field; the same on every rank count).
 LANCZOS_SEED = 20
 #: Aliases of the hats' spectrum summed a side for the coarse compliance (their
 #: weight falls like the fourth power of the alias' order).
 ALIASES = 4
-#: From this many coarse nodes a side the coarse system is transformed by SciPy, below it
-#: by NumPy (:func:`coarse_transforms`).
-SCIPY_SIDE = 512
-
-
-def coarse_transforms(shape):
-    """The module whose ``rfft2`` / ``irfft2`` transform a coarse grid of ``shape``.
-
-    Why two: on large coarse grids SciPy's transforms are markedly faster than
-    NumPy's, and the coarse system costs some sixty pairs per fine iteration;
-    on small ones the two are about as fast, and importing ``scipy.fft`` in a
-    process that has not would cost a small solve more time and memory than the
-    transforms save.  Both are pocketfft: the results agree to round-off.
-    Depends on the shape only, never on the ranks.
-    """
-    if max(shape) >= SCIPY_SIDE:
-        # deferred: importing SciPy changes warning filters, which `import petgap` must not do
-        from scipy import fft
-        return fft
-    return np.fft
+def coarse_grid(grid, block):
+    """The grid of the coarse system of ``grid`` at cells of ``block`` pixels (module
+    docstring): on ``grid``'s ranks with its planner and wisdom, or whole on every rank
+    (``MPI.COMM_SELF``, FFTW's "estimate") where it has at most :data:`WHOLE_POINTS`
+    points or too few rows for the ranks.  Collective."""
+    shape = (grid.nx // block, grid.ny // block)
+    size = (grid.Lx, grid.Ly)
+    whole = grid.comm.size > 1 and shape[0] * shape[1] <= WHOLE_POINTS
+    if not whole:
+        try:
+            check_decomposition(grid.comm, *shape)
+        except DecompositionError:
+            whole = True
+    if whole:
+        return Grid(shape, size=size, comm=MPI.COMM_SELF, planner="estimate", wisdom=False)
+    return Grid(shape, size=size, comm=grid.comm, planner=grid.planner, wisdom=grid.wisdom)
 
 
 def block_for(shape):
@@ -184,7 +192,8 @@ def _hat_spectrum(k, n, b):
 
 
 def coarse_compliance(shape, size, block, contact_modulus):
-    """``rfft2`` symbol of ``Fc = R K^{-1} P`` on the coarse grid (zero mean mode)."""
+    """Symbol of ``Fc = R K^{-1} P`` on the coarse grid in NumPy's ``rfft2`` layout (zero mean
+    mode); :class:`CoarseTerm` takes its rows of the transpose, FFTW-MPI's layout."""
     (nx, ny), (lx, ly), b = shape, size, block
     ncx, ncy = nx // b, ny // b
     # each of the b aliases of a coarse wavenumber once (all of them for small b)
@@ -219,28 +228,73 @@ class CoarseTerm:
         (``c`` of :mod:`petgap.solvers.gap_cg`); the coarse grid's mean mode then
         carries it too, and the springs stiffen it as the contact does.  Zero under
         mean-gap control, whose directions have no mean.
+
+    Conventions: the coarse fields held here (``springs``, ``contact``, ``rhs``) are this
+    rank's rows of the coarse grid (:attr:`cgrid`'s slab; all of them where it is whole);
+    the vectors of the coarse conjugate gradients are this rank's part of their spectrum,
+    in the FFTW-MPI transposed layout, unnormalised (:meth:`spectrum`, :meth:`space`).
     """
 
     def __init__(self, grid, contact_modulus, block, mean_compliance=0.0):
         self.grid, self.block = grid, block
         self.x0 = grid.x_slice.start
         self.coarse_shape = (grid.shape[0] // block, grid.shape[1] // block)
-        self.transforms = coarse_transforms(self.coarse_shape)
-        self.symbol = coarse_compliance(grid.shape, (grid.Lx, grid.Ly), block, contact_modulus)
-        self.symbol[0, 0] = mean_compliance
+        #: The coarse system's grid (:func:`coarse_grid`).
+        self.cgrid = cgrid = coarse_grid(grid, block)
+        self.split = cgrid.comm.size > 1      # the coarse slabs are parts, not the whole
+        if self.split:
+            width = self.coarse_shape[1]
+            self.slab_sizes = [rows * width for rows in
+                               grid.comm.allgather(cgrid.local_shape[0])]
+        symbol = coarse_compliance(grid.shape, (grid.Lx, grid.Ly), block, contact_modulus)
+        symbol[0, 0] = mean_compliance
+        # this rank's rows of the transposed half plane (ky, kx), as FFTW-MPI gives them
+        self.symbol = np.ascontiguousarray(symbol.T[cgrid.ky_slice])
         self.root_symbol = np.sqrt(self.symbol)   # H = Fc^{1/2}
-        # the rfft2 columns that are their own mirrors (Parseval's sums, _dot)
-        self.own_mirror = (0, -1) if self.coarse_shape[1] % 2 == 0 else (0,)
-        self.springs = np.zeros(self.coarse_shape)
-        self.rhs = np.zeros(self.coarse_shape)
+        self.root_scaled = self.root_symbol / float(cgrid.npoints)   # with the pair's 1/N
+        # the half plane's rows that are their own mirrors (Parseval's sums, _dot)
+        self.own_mirror = np.flatnonzero(cgrid.hermitian_weight == 1.0)
+        self.springs = np.zeros(cgrid.local_shape)
+        self.rhs = np.zeros(cgrid.local_shape)
         self.contact = self.counts = None      # the contact's springs, and its counts then
         self.softening = 1.0                   # theta of the module docstring
         self.stale = True
         self.inner_iterations = self.clipped = self.respring = 0
 
-    def _summed(self, local):
-        self.grid.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
+    def _restricted(self, local):
+        """This rank's coarse rows of the sum over the ranks of ``local`` (whole coarse
+        fields of partial sums, as the restriction kernels write them), over ``b^2``."""
+        comm = self.grid.comm
+        if self.split:
+            out = np.empty(self.cgrid.local_shape)
+            comm.Reduce_scatter(local, out, recvcounts=self.slab_sizes, op=MPI.SUM)
+            local = out
+        elif comm.size > 1:
+            comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
         return local / float(self.block) ** 2
+
+    def _gathered(self, slab):
+        """The whole coarse field from every rank's ``slab`` (the prolongation reads it)."""
+        if not self.split:
+            return slab
+        whole = np.empty(self.coarse_shape)
+        self.grid.comm.Allgatherv(slab, [whole, self.slab_sizes])
+        return whole
+
+    def _total(self, slab):
+        """``sum`` of a coarse field over the whole coarse grid."""
+        return self._reduced(float(slab.sum()))
+
+    def spectrum(self, slab):
+        """This rank's part of the (unnormalised) transform of a coarse field given by its
+        rows: a new array in the transposed layout."""
+        np.copyto(self.cgrid.real, slab)
+        return self.cgrid.forward().copy()
+
+    def space(self, spectrum):
+        """This rank's rows of the coarse field whose transform is ``spectrum``."""
+        np.copyto(self.cgrid.fourier, spectrum)
+        return self.cgrid.backward() * (1.0 / self.cgrid.npoints)
 
     def write_residual(self, f, s):
         """The residual into the FFT buffer (as :func:`petgap.solvers._kernels.gcg_write_residual`),
@@ -258,18 +312,18 @@ class CoarseTerm:
             f.half_space.apply_in_buffer(inverse=False)               # K 1_C
             local = np.zeros(self.coarse_shape)
             _k.contact_springs(f.g, f.padded, self.x0, self.block, local)
-            self.contact = self._summed(local)
+            self.contact = self._restricted(local)
             self.respring += 1
         local = np.zeros((3,) + self.coarse_shape)
         _k.coarse_residual(f.pel, f.g, f.vp, f.vpp, f.adhesive, f.divisor, s.lam_f, s.lam,
                            f.padded, self.x0, self.block, local[0], local[1], local[2])
-        free, self.rhs, counts = self._summed(local)
+        free, self.rhs, counts = (self._restricted(part) for part in local)
         self.form_springs(free, estimate=fresh)
         if fresh:
             self.counts, self.stale = counts, False
         else:
-            moved = float(np.abs(counts - self.counts).sum())
-            self.stale = moved > RESPRING * float(self.counts.sum())
+            moved = self._total(np.abs(counts - self.counts))
+            self.stale = moved > RESPRING * self._total(self.counts)
 
     def form_springs(self, free, estimate):
         """``W = W_C + theta W_D`` from the contact's springs and the free set's ``free``;
@@ -279,29 +333,30 @@ class CoarseTerm:
         self.springs = self.contact + self.softening * free
 
     def _dot(self, a, b):
-        """``sum a b`` of two real coarse fields given by their ``rfft2`` (Parseval, up to ``1/N``).
+        """``sum a b`` of two real coarse fields given by their spectra (Parseval, up to ``N``).
 
-        The half plane holds every other column once and its mirror implicitly:
-        twice its sum, less the columns that are their own mirrors.  Each such column
-        is copied before its product: ``vdot`` of a strided complex column (BLAS
-        ``zdotc`` with a stride, OpenBLAS 0.3.21 of Debian 12) reads past the array's
-        end, which kills the process where the array ends at an unmapped page (the
-        last column of a 1024^2 coarse grid's ``rfft2``).
+        The half plane holds every other row once and its mirror implicitly: twice its
+        sum, less the rows that are their own mirrors (contiguous rows of the transposed
+        layout: a strided complex BLAS product, OpenBLAS 0.3.21's ``zdotc``, reads past
+        an array's end).  Summed over the ranks where the coarse grid is split.
         """
         dot = 2.0 * np.vdot(a, b).real
-        for c in self.own_mirror:
-            dot -= np.vdot(np.ascontiguousarray(a[:, c]), np.ascontiguousarray(b[:, c])).real
-        return float(dot)
+        for row in self.own_mirror:
+            dot -= np.vdot(a[row], b[row]).real
+        return self._reduced(float(dot))
+
+    def _reduced(self, local):
+        """A sum over the coarse grid from this rank's part of it."""
+        return self.cgrid.comm.allreduce(local, op=MPI.SUM) if self.split else local
 
     def smallest_eigenvalue(self, springs):
         """Lanczos estimate (from above) of the smallest eigenvalue of ``I + H W H``.
 
         :data:`LANCZOS_STEPS` steps from a fixed random field, the same on every rank
-        (the springs are summed over the ranks first): one transform pair of the coarse
-        grid a step.
+        count: one transform pair of the coarse grid a step.
         """
         rng = np.random.default_rng(LANCZOS_SEED)
-        x = self.transforms.rfft2(rng.standard_normal(self.coarse_shape))
+        x = self.spectrum(rng.standard_normal(self.coarse_shape)[self.cgrid.x_slice])
         x /= np.sqrt(self._dot(x, x))
         previous, off = np.zeros_like(x), 0.0
         diagonal, offdiagonal = [], []
@@ -319,45 +374,53 @@ class CoarseTerm:
         return float(np.linalg.eigvalsh(tridiagonal)[0])
 
     def _apply(self, springs, x):
-        """``(I + H W H) x`` on the ``rfft2`` of ``x``: one transform pair of the coarse grid."""
-        fft = self.transforms
-        return x + self.root_symbol * fft.rfft2(
-            springs * fft.irfft2(self.root_symbol * x, s=self.coarse_shape))
+        """``(I + H W H) x`` on the spectrum ``x``: one transform pair of the coarse grid,
+        in its FFT buffers."""
+        c = self.cgrid
+        np.multiply(self.root_symbol, x, out=c.fourier)
+        real = c.backward()
+        np.multiply(real, springs, out=real)
+        y = c.forward() * self.root_scaled
+        y += x
+        return y
 
     def _solve(self, springs, b):
         """``(I + H W H)^{-1} b`` by conjugate gradients, or None where it is not positive.
 
-        The vectors are kept as their ``rfft2`` (``b`` too): ``H`` is a multiplier
-        there and ``W`` one in real space, so an iteration costs one transform pair
-        of the coarse grid, and inner products are Parseval's over the half plane.
+        The vectors are kept as their spectra (``b`` too): ``H`` is a multiplier there
+        and ``W`` one in real space, so an iteration costs one transform pair of the
+        coarse grid (the operator of :meth:`_apply`, in the fused passes of
+        :mod:`petgap.solvers._kernels`), and inner products are Parseval's over the half
+        plane.
         """
+        c, weight = self.cgrid, self.cgrid.hermitian_weight
         x = np.zeros_like(b)
         res, norm = b.copy(), float(np.sqrt(self._dot(b, b)))
         if norm == 0.0:
             return x
-        d, rr = res.copy(), norm * norm
+        d, ad = np.zeros_like(b), np.empty_like(b)
+        rr, beta = norm * norm, 0.0
         for _ in range(MAX_INNER):
-            ad = self._apply(springs, d)
-            curvature = self._dot(d, ad)
+            _k.coarse_cg_direction(d, res, beta, self.root_symbol, c.fourier)
+            real = c.backward()
+            np.multiply(real, springs, out=real)
+            curvature = self._reduced(_k.coarse_cg_image(c.forward(), self.root_scaled, d, ad,
+                                                         weight))
             if not curvature > 0:
                 return None
             alpha = rr / curvature
-            x += alpha * d
-            res -= alpha * ad
-            rr_new = self._dot(res, res)
+            rr_new = self._reduced(_k.coarse_cg_step(x, res, d, ad, alpha, weight))
             self.inner_iterations += 1
             if np.sqrt(rr_new) <= INNER_TOLERANCE * norm:
                 break
-            d = res + (rr_new / rr) * d
-            rr = rr_new
+            beta, rr = rr_new / rr, rr_new
         return x
 
     def correction(self):
-        """The coarse field ``y = Fc R r - H v`` whose prolongation ``P y`` is subtracted from
-        ``K^{-1} r`` (module docstring), in the pass that sums the preconditioned residual
-        (:func:`petgap.solvers._kernels.gcg_precond_sums`)."""
-        fft = self.transforms
-        rhs = fft.rfft2(self.rhs)
+        """The whole coarse field ``y = Fc R r - H v`` whose prolongation ``P y`` is
+        subtracted from ``K^{-1} r`` (module docstring), in the pass that sums the
+        preconditioned residual (:func:`petgap.solvers._kernels.gcg_precond_sums`)."""
+        rhs = self.spectrum(self.rhs)
         hr = self.root_symbol * rhs
         v = self._solve(self.springs, hr)
         while v is None:
@@ -370,4 +433,4 @@ class CoarseTerm:
             self.springs = self.contact + BACKOFF * free
             self.softening *= BACKOFF
             v = self._solve(self.springs, hr)
-        return fft.irfft2(self.symbol * rhs - self.root_symbol * v, s=self.coarse_shape)
+        return self._gathered(self.space(self.symbol * rhs - self.root_symbol * v))

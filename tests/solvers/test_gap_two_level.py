@@ -7,9 +7,11 @@
   hat matrices, on every rank's slab;
 * ``P Fc R`` stays below ``K^{-1}`` (what keeps the preconditioner positive
   definite where the springs are), for cells of 2 to 16 pixels;
-* the coarse system, solved on its fields' ``rfft2``, is solved: Parseval's
+* the coarse system, solved on its fields' spectra, is solved: Parseval's
   inner product over the half plane and the solution against a dense solve, on
   even and odd coarse sides;
+* split over the ranks, the coarse system gives the correction and the eigenvalue
+  estimate of the coarse system solved whole, to round-off;
 * a two-level adhesive solve reaches the state of the default solver to the
   tolerance's reach, and the same state on 1 rank and on ``comm``;
 * the springs on the contact set sum to the contact's stiffness ``1_C . K 1_C``;
@@ -35,9 +37,8 @@ from petgap.parallel.grid import Grid
 from petgap.solvers import _kernels as _k
 from petgap.solvers.gap_cg import gap_cg
 from petgap.solvers import gap_two_level
-from petgap.solvers.gap_two_level import (INNER_TOLERANCE, MARGIN, SCIPY_SIDE, CoarseTerm,
-                                          block_for, coarse_compliance, coarse_transforms,
-                                          softening_for)
+from petgap.solvers.gap_two_level import (INNER_TOLERANCE, MARGIN, CoarseTerm, block_for,
+                                          coarse_compliance, softening_for)
 from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
 
@@ -129,38 +130,66 @@ def test_coarse_term_stays_below_the_compliance(b):
     assert largest < 1.0
 
 
-@pytest.mark.parametrize("library", ["numpy", "scipy"])
-@pytest.mark.parametrize("shape", [(128, 96), (80, 112)])
-def test_coarse_system_is_solved_on_its_spectrum(shape, library):
-    """``(I + H W H) v = b`` by the coarse term's conjugate gradients on ``rfft2`` fields,
-    against a dense solve; ``_dot`` is the real-space inner product (coarse sides
-    8 x 6 and 5 x 7: with and without a Nyquist column), by either library's transforms
-    (:func:`coarse_transforms` gives SciPy's to large coarse grids only)."""
-    term = CoarseTerm(Grid(shape, size=(1.0, 0.75), comm=MPI.COMM_SELF, planner="estimate"),
-                      E_STAR, 16)
-    if library == "scipy":
-        term.transforms = pytest.importorskip("scipy.fft")
-    cs = term.coarse_shape
-    rng = np.random.default_rng(3)
-    a, b = rng.standard_normal(cs), rng.standard_normal(cs)
-    dot = term._dot(np.fft.rfft2(a), np.fft.rfft2(b)) / a.size
-    assert dot == pytest.approx(np.sum(a * b), rel=1e-13)
-    springs = rng.uniform(0.0, 50.0, cs)
-    root = lambda y: np.fft.irfft2(np.fft.rfft2(y) * term.root_symbol, s=cs)
-    unit = np.eye(a.size).reshape((a.size,) + cs)
-    dense = np.array([(e + root(springs * root(e))).ravel() for e in unit]).T
-    v = np.fft.irfft2(term._solve(springs, np.fft.rfft2(b)), s=cs)
-    exact = np.linalg.solve(dense, b.ravel())
-    assert np.max(np.abs(v.ravel() - exact)) <= 10 * INNER_TOLERANCE * np.max(np.abs(exact))
-    assert term.inner_iterations > 1
+def root_of(term):
+    """``H = Fc^{1/2}`` of ``term``'s coarse grid on real fields, by NumPy (zero mean mode)."""
+    grid, cs = term.grid, term.coarse_shape
+    half = np.sqrt(coarse_compliance(grid.shape, (grid.Lx, grid.Ly), term.block, E_STAR))
+    return lambda y: np.fft.irfft2(np.fft.rfft2(y) * half, s=cs)
 
 
 def dense_system(term, springs):
     """``I + H W H`` of ``term``'s coarse grid as a dense matrix (real space)."""
-    cs = term.coarse_shape
-    root = lambda y: np.fft.irfft2(np.fft.rfft2(y) * term.root_symbol, s=cs)
+    cs, root = term.coarse_shape, root_of(term)
     unit = np.eye(cs[0] * cs[1]).reshape((-1,) + cs)
     return np.array([(e + root(springs * root(e))).ravel() for e in unit]).T
+
+
+@pytest.mark.parametrize("shape", [(128, 96), (80, 112)])
+def test_coarse_system_is_solved_on_its_spectrum(shape):
+    """``(I + H W H) v = b`` by the coarse term's conjugate gradients on the fields'
+    spectra (FFTW's transposed half plane), against a dense solve; ``_dot`` is the
+    real-space inner product (coarse sides 8 x 6 and 5 x 7: with and without a Nyquist
+    row)."""
+    term = CoarseTerm(Grid(shape, size=(1.0, 0.75), comm=MPI.COMM_SELF, planner="estimate"),
+                      E_STAR, 16)
+    cs = term.coarse_shape
+    rng = np.random.default_rng(3)
+    a, b = rng.standard_normal(cs), rng.standard_normal(cs)
+    dot = term._dot(term.spectrum(a), term.spectrum(b)) / a.size
+    assert dot == pytest.approx(np.sum(a * b), rel=1e-13)
+    assert np.allclose(term.space(term.spectrum(a)), a, rtol=0, atol=1e-14)
+    springs = rng.uniform(0.0, 50.0, cs)
+    v = term.space(term._solve(springs, term.spectrum(b)))
+    exact = np.linalg.solve(dense_system(term, springs), b.ravel())
+    assert np.max(np.abs(v.ravel() - exact)) <= 10 * INNER_TOLERANCE * np.max(np.abs(exact))
+    assert term.inner_iterations > 1
+
+
+def test_the_coarse_system_split_over_the_ranks_is_the_whole_one(comm, monkeypatch):
+    """With the coarse grid split over ``comm``'s ranks (every coarse grid, for the test),
+    the correction gathered on every rank and the smallest eigenvalue's estimate are the
+    whole system's (on ``MPI.COMM_SELF``) to round-off, with a softening that takes the
+    unscaled system past zero; on 2 ranks the 12 coarse rows split 6 / 6, the 9 Fourier
+    rows 5 / 4."""
+    monkeypatch.setattr(gap_two_level, "WHOLE_POINTS", 0)
+    shape, size, block = (96, 128), (1.0, 1.25), 8
+    split = CoarseTerm(Grid(shape, size=size, comm=comm, planner="estimate"), E_STAR, block)
+    whole = CoarseTerm(Grid(shape, size=size, comm=MPI.COMM_SELF, planner="estimate"),
+                       E_STAR, block)
+    assert split.cgrid.comm.size == comm.size and whole.cgrid.comm.size == 1
+    contact, free = sticky_springs(whole, 20.0)
+    rhs = np.random.default_rng(6).standard_normal(whole.coarse_shape)
+    rows = split.cgrid.x_slice
+    for term, part in ((whole, slice(None)), (split, rows)):
+        term.contact = contact[part]
+        term.form_springs(free[part], estimate=True)
+        term.rhs = rhs[part]
+    assert whole.softening < 1.0
+    assert split.softening == pytest.approx(whole.softening, rel=1e-10)
+    y_whole, y_split = whole.correction(), split.correction()
+    assert y_split.shape == whole.coarse_shape
+    assert np.max(np.abs(y_split - y_whole)) <= 1e-10 * np.max(np.abs(y_whole))
+    assert split.inner_iterations == whole.inner_iterations
 
 
 def sticky_springs(term, scale):
@@ -352,35 +381,10 @@ def _in_fresh_process(tmp_path, source):
                                                 env=clean_env()))
 
 
-def test_small_coarse_grids_are_transformed_without_scipy(tmp_path):
-    """Below :data:`SCIPY_SIDE` nodes a side the coarse system runs on NumPy's transforms,
-    and a solve there does not import ``scipy.fft`` (its import costs a small solve more
-    time and memory than its transforms save); from that side on, SciPy's.  The second half
-    in a fresh process, where nothing else has imported SciPy."""
-    import scipy.fft
-    assert coarse_transforms((SCIPY_SIDE // 2, SCIPY_SIDE // 2)) is np.fft
-    assert coarse_transforms((SCIPY_SIDE, SCIPY_SIDE // 2)) is scipy.fft
-    done = _in_fresh_process(tmp_path, """
-        import sys
-        import numpy as np
-        from mpi4py import MPI
-        from petgap.parallel.grid import Grid
-        from petgap.solvers.gap_two_level import CoarseTerm
-        term = CoarseTerm(Grid((128, 128), comm=MPI.COMM_SELF, planner="estimate"), 1.0, 16)
-        term.rhs = np.random.default_rng(0).random(term.coarse_shape)
-        term.springs = np.ones(term.coarse_shape)
-        y = term.correction()
-        assert term.inner_iterations > 0 and np.abs(y).max() > 0
-        print("scipy.fft" in sys.modules)
-        """)
-    assert done.returncode == 0, done.stderr[-2000:]
-    assert done.stdout.strip() == "False"
-
-
 def test_inner_products_of_a_large_coarse_grid(tmp_path):
-    """Parseval's inner product on a 1024^2 coarse grid's ``rfft2`` (16384^2 at 16-pixel
+    """Parseval's inner product on a 1024^2 coarse grid's spectrum (8192^2 at 8-pixel
     cells) equals the real fields' product, with each field ending exactly at the end of
-    a mapping of its own: a strided BLAS product of the last column read past the array
+    a mapping of its own: a strided BLAS product of a complex column read past the array
     and killed the process (run in a process of its own, so that a crash fails here)."""
     done = _in_fresh_process(tmp_path, """
         import mmap, types
@@ -398,8 +402,9 @@ def test_inner_products_of_a_large_coarse_grid(tmp_path):
         rng = np.random.default_rng(0)
         for n in (1024, 512, 1022):
             x, y = rng.random((n, n)), rng.random((n, n))
-            a, b = at_mapping_end(np.fft.rfft2(x)), at_mapping_end(np.fft.rfft2(y))
-            term = types.SimpleNamespace(own_mirror=(0, -1) if n % 2 == 0 else (0,))
+            a, b = (at_mapping_end(np.ascontiguousarray(np.fft.rfft2(v).T)) for v in (x, y))
+            term = types.SimpleNamespace(own_mirror=(0, n // 2) if n % 2 == 0 else (0,),
+                                         _reduced=lambda local: local)
             dot = CoarseTerm._dot(term, a, b) / (n * n)
             assert abs(dot - float(np.sum(x * y))) <= 1e-10 * float(np.sum(x * y)), n
         print("ok")
