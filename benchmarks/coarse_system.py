@@ -75,7 +75,7 @@ def main():
             best = min(best, spent / its)
         lanczos = comm.allreduce(lanczos, op=MPI.MAX)
         if comm.rank == 0:
-            held = "split" if term.split else "whole"
+            held = "split" if term.split else ("whole" if comm.size > 1 else "one rank")
             print(f"| {n}^2 | {comm.size} | {shape[0]}^2 | {held} | {1e3 * pair_s:.2f} | {its} | "
                   f"{1e3 * best:.2f} | {best / pair_s:.2f} | {1e3 * lanczos:.2f} |", flush=True)
         del term, grid

@@ -504,3 +504,21 @@ def coarse_cg_step(double complex[:, ::1] x, double complex[:, ::1] res,
                 s += v.real * v.real + v.imag * v.imag
             total += weight[i] * s
     return total
+
+
+def coarse_lanczos_residual(double complex[:, ::1] y, const double complex[:, ::1] x,
+                            const double complex[:, ::1] previous, double a, double b,
+                            const double[::1] weight):
+    """``y -= a x + b previous`` (the Lanczos three-term step); returns ``sum weight |y|^2``."""
+    cdef Py_ssize_t i, j, m = y.shape[0], n = y.shape[1]
+    cdef double complex v
+    cdef double s, total = 0.0
+    with nogil:
+        for i in range(m):
+            s = 0.0
+            for j in range(n):
+                v = y[i, j] - a * x[i, j] - b * previous[i, j]
+                y[i, j] = v
+                s += v.real * v.real + v.imag * v.imag
+            total += weight[i] * s
+    return total

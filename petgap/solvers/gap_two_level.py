@@ -353,47 +353,50 @@ class CoarseTerm:
         """Lanczos estimate (from above) of the smallest eigenvalue of ``I + H W H``.
 
         :data:`LANCZOS_STEPS` steps from a fixed random field, the same on every rank
-        count: one transform pair of the coarse grid a step.
+        count: one transform pair of the coarse grid a step, and the fused passes of the
+        conjugate gradients (:meth:`_solve`).
         """
+        weight = self.cgrid.hermitian_weight
         rng = np.random.default_rng(LANCZOS_SEED)
         x = self.spectrum(rng.standard_normal(self.coarse_shape)[self.cgrid.x_slice])
         x /= np.sqrt(self._dot(x, x))
-        previous, off = np.zeros_like(x), 0.0
+        previous, y, off = np.zeros_like(x), np.empty_like(x), 0.0
         diagonal, offdiagonal = [], []
         for _ in range(LANCZOS_STEPS):
-            y = self._apply(springs, x)
-            a = self._dot(x, y)
+            a = self._reduced(_k.coarse_cg_image(self._image(springs, x), self.root_scaled,
+                                                 x, y, weight))
             diagonal.append(a)
-            y -= a * x + off * previous
-            off = np.sqrt(self._dot(y, y))
+            off = np.sqrt(self._reduced(_k.coarse_lanczos_residual(y, x, previous, a, off,
+                                                                   weight)))
             if not off > 1e-12 * abs(a) or len(diagonal) == LANCZOS_STEPS:
                 break
             offdiagonal.append(off)
-            previous, x = x, y / off
+            y *= 1.0 / off
+            previous, x, y = x, y, previous
         tridiagonal = (np.diag(diagonal) + np.diag(offdiagonal, 1) + np.diag(offdiagonal, -1))
         return float(np.linalg.eigvalsh(tridiagonal)[0])
 
-    def _apply(self, springs, x):
-        """``(I + H W H) x`` on the spectrum ``x``: one transform pair of the coarse grid,
-        in its FFT buffers."""
+    def _image(self, springs, x=None):
+        """``FFT(W IFFT(H x))``, unnormalised, in the coarse grid's Fourier buffer: one
+        transform pair of the coarse grid.  ``(I + H W H) x`` is ``x + H image / N``.
+        Without ``x`` the buffer already holds ``H x``."""
         c = self.cgrid
-        np.multiply(self.root_symbol, x, out=c.fourier)
+        if x is not None:
+            np.multiply(self.root_symbol, x, out=c.fourier)
         real = c.backward()
         np.multiply(real, springs, out=real)
-        y = c.forward() * self.root_scaled
-        y += x
-        return y
+        return c.forward()
 
     def _solve(self, springs, b):
         """``(I + H W H)^{-1} b`` by conjugate gradients, or None where it is not positive.
 
         The vectors are kept as their spectra (``b`` too): ``H`` is a multiplier there
         and ``W`` one in real space, so an iteration costs one transform pair of the
-        coarse grid (the operator of :meth:`_apply`, in the fused passes of
-        :mod:`petgap.solvers._kernels`), and inner products are Parseval's over the half
+        coarse grid (:meth:`_image`) and three fused passes
+        (:mod:`petgap.solvers._kernels`), and inner products are Parseval's over the half
         plane.
         """
-        c, weight = self.cgrid, self.cgrid.hermitian_weight
+        weight = self.cgrid.hermitian_weight
         x = np.zeros_like(b)
         res, norm = b.copy(), float(np.sqrt(self._dot(b, b)))
         if norm == 0.0:
@@ -401,11 +404,9 @@ class CoarseTerm:
         d, ad = np.zeros_like(b), np.empty_like(b)
         rr, beta = norm * norm, 0.0
         for _ in range(MAX_INNER):
-            _k.coarse_cg_direction(d, res, beta, self.root_symbol, c.fourier)
-            real = c.backward()
-            np.multiply(real, springs, out=real)
-            curvature = self._reduced(_k.coarse_cg_image(c.forward(), self.root_scaled, d, ad,
-                                                         weight))
+            _k.coarse_cg_direction(d, res, beta, self.root_symbol, self.cgrid.fourier)
+            curvature = self._reduced(_k.coarse_cg_image(self._image(springs), self.root_scaled,
+                                                         d, ad, weight))
             if not curvature > 0:
                 return None
             alpha = rr / curvature
