@@ -17,9 +17,13 @@ and its correction is computed ``--repeat`` times.  A row gives:
   the pair;
 * **Lanczos ms**: one step of the smallest eigenvalue's estimate (made at each respring).
 
+``--whole-points P`` sets the largest coarse grid solved whole on every rank
+(``gap_two_level.WHOLE_POINTS``) for the run: 0 splits every coarse grid the ranks allow.
+
 Usage::
 
     mpirun -n R python benchmarks/coarse_system.py --sizes 2048 4096 8192 [--repeat 3]
+        [--whole-points P]
 """
 import argparse
 import time
@@ -29,14 +33,18 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[2048, 4096, 8192])
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--whole-points", type=int, default=None)
     args = parser.parse_args()
 
     import numpy as np
     from mpi4py import MPI
 
     from petgap.parallel.grid import Grid
+    from petgap.solvers import gap_two_level
     from petgap.solvers.gap_two_level import LANCZOS_STEPS, CoarseTerm, block_for
 
+    if args.whole_points is not None:
+        gap_two_level.WHOLE_POINTS = args.whole_points
     comm = MPI.COMM_WORLD
     if comm.rank == 0:
         print("| N | ranks | coarse grid | held | pair ms | inner its | inner ms | inner / pair "

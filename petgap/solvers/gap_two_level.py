@@ -104,7 +104,6 @@ from mpi4py import MPI
 
 from petgap.parallel.grid import DecompositionError, Grid, check_decomposition
 from petgap.solvers import _kernels as _k
-from petgap.solvers.coarse import WHOLE_POINTS
 
 #: Pixels between coarse nodes (the side of a coarse cell).  The springs and the
 #: softening of one patch's edge must fall into cells of their own for the coarse model to
@@ -140,6 +139,11 @@ LANCZOS_STEPS = 40
 #: which the softening is left out (the springs clipped at zero).
 BACKOFF = 0.8
 MIN_SOFTENING = 0.3
+#: Coarse systems of at most this many nodes are solved whole on every rank, larger ones
+#: split over the ranks (module docstring).  Two ranks split a 128^2 system's inner
+#: iteration in two thirds of its time whole, a 256^2 one's in three quarters, and are no
+#: faster split at 64^2 (``benchmarks/coarse_system.py``, docs/design.md).
+WHOLE_POINTS = 64 * 64
 #: Seed of the Lanczos estimate's start (any fixed field; the same on every rank count).
 LANCZOS_SEED = 20
 #: Aliases of the hats' spectrum summed a side for the coarse compliance (their
