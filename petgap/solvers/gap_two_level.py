@@ -91,9 +91,9 @@ The coarse system lives on a grid of its own (:func:`coarse_grid`) with petgap's
 FFTW-MPI transforms, split over the fine grid's ranks: the fine slabs' sums are
 reduced onto the coarse slabs, each rank iterates on its part of the spectrum, and
 the correction is gathered whole for the prolongation.  Why not solved whole on every
-rank: it costs some forty coarse pairs per fine iteration, a fifth of a sticky
-solve's time at 8192^2 on one rank, and a copy on every rank would not get faster
-with the ranks while the fine grid's share does.  Coarse grids of at most
+rank: on the sticky side it costs forty to eighty coarse pairs per fine iteration, a
+share of the solve that a copy on every rank would keep while the ranks share the fine
+grid's work.  Coarse grids of at most
 :data:`WHOLE_POINTS` points (or too few rows for the ranks) are solved whole on every
 rank, with FFTW's "estimate" plans (the same arithmetic everywhere): spread over the
 ranks their transforms would cost the messages' latency and little else.  Either
@@ -140,9 +140,9 @@ LANCZOS_STEPS = 40
 BACKOFF = 0.8
 MIN_SOFTENING = 0.3
 #: Coarse systems of at most this many nodes are solved whole on every rank, larger ones
-#: split over the ranks (module docstring).  Two ranks split a 128^2 system's inner
-#: iteration in two thirds of its time whole, a 256^2 one's in three quarters, and are no
-#: faster split at 64^2 (``benchmarks/coarse_system.py``, docs/design.md).
+#: split over the ranks (module docstring).  Split over two ranks, an inner iteration of a
+#: 256^2 system takes three quarters of its time whole, of a 128^2 one 0.7-0.9, of a 64^2
+#: one as long (``benchmarks/coarse_system.py``, docs/design.md).
 WHOLE_POINTS = 64 * 64
 #: Seed of the Lanczos estimate's start (any fixed field; the same on every rank count).
 LANCZOS_SEED = 20
