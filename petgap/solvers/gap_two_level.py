@@ -149,6 +149,8 @@ LANCZOS_SEED = 20
 #: Aliases of the hats' spectrum summed a side for the coarse compliance (their
 #: weight falls like the fourth power of the alias' order).
 ALIASES = 4
+
+
 def coarse_grid(grid, block):
     """The grid of the coarse system of ``grid`` at cells of ``block`` pixels (module
     docstring): on ``grid``'s ranks with its planner and wisdom, or whole on every rank

@@ -10,7 +10,8 @@
 * the coarse system, solved on its fields' spectra, is solved: Parseval's
   inner product over the half plane and the solution against a dense solve, on
   even and odd coarse sides;
-* split over the ranks, the coarse system gives the correction and the eigenvalue
+* the coarse grid is split over the ranks where they can split it, whole on every
+  rank where not; split, the coarse system gives the correction and the eigenvalue
   estimate of the coarse system solved whole, to round-off;
 * a two-level adhesive solve reaches the state of the default solver to the
   tolerance's reach, and the same state on 1 rank and on ``comm``;
@@ -38,7 +39,7 @@ from petgap.solvers import _kernels as _k
 from petgap.solvers.gap_cg import gap_cg
 from petgap.solvers import gap_two_level
 from petgap.solvers.gap_two_level import (INNER_TOLERANCE, MARGIN, CoarseTerm, block_for,
-                                          coarse_compliance, softening_for)
+                                          coarse_compliance, coarse_grid, softening_for)
 from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
 
@@ -163,6 +164,19 @@ def test_coarse_system_is_solved_on_its_spectrum(shape):
     exact = np.linalg.solve(dense_system(term, springs), b.ravel())
     assert np.max(np.abs(v.ravel() - exact)) <= 10 * INNER_TOLERANCE * np.max(np.abs(exact))
     assert term.inner_iterations > 1
+
+
+def test_a_coarse_grid_is_split_where_the_ranks_can_split_it(comm, monkeypatch):
+    """Above :data:`WHOLE_POINTS` the coarse grid lives on the fine grid's ranks, unless
+    FFTW-MPI would leave a rank without a row: an 8 x 1 coarse grid has one Fourier row,
+    which two ranks cannot share, and is solved whole on every rank."""
+    monkeypatch.setattr(gap_two_level, "WHOLE_POINTS", 0)
+    split = coarse_grid(Grid((64, 64), comm=comm, planner="estimate"), 8)
+    assert split.shape == (8, 8) and split.comm.size == comm.size
+    narrow = coarse_grid(Grid((64, 8), comm=comm, planner="estimate"), 8)
+    assert narrow.shape == (8, 1) and narrow.comm.size == 1
+    monkeypatch.setattr(gap_two_level, "WHOLE_POINTS", 64)
+    assert coarse_grid(Grid((64, 64), comm=comm, planner="estimate"), 8).comm.size == 1
 
 
 def test_the_coarse_system_split_over_the_ranks_is_the_whole_one(comm, monkeypatch):
