@@ -487,22 +487,30 @@ def coarse_cg_image(const double complex[:, ::1] image, const double[:, ::1] sca
     return total
 
 
+cdef double _less_norm(double complex *y, const double complex *x, double a,
+                      const double complex *p, double b, Py_ssize_t n) noexcept nogil:
+    """``y -= a x + b p`` along one row; returns ``sum |y|^2`` of the row."""
+    cdef Py_ssize_t j
+    cdef double complex v
+    cdef double s = 0.0
+    for j in range(n):
+        v = y[j] - a * x[j] - b * p[j]
+        y[j] = v
+        s += v.real * v.real + v.imag * v.imag
+    return s
+
+
 def coarse_cg_step(double complex[:, ::1] x, double complex[:, ::1] res,
                    const double complex[:, ::1] d, const double complex[:, ::1] ad,
                    double alpha, const double[::1] weight):
     """``x += alpha d``, ``res -= alpha ad``; returns ``sum weight |res|^2``."""
     cdef Py_ssize_t i, j, m = d.shape[0], n = d.shape[1]
-    cdef double complex v
-    cdef double s, total = 0.0
+    cdef double total = 0.0
     with nogil:
         for i in range(m):
-            s = 0.0
             for j in range(n):
                 x[i, j] = x[i, j] + alpha * d[i, j]
-                v = res[i, j] - alpha * ad[i, j]
-                res[i, j] = v
-                s += v.real * v.real + v.imag * v.imag
-            total += weight[i] * s
+            total += weight[i] * _less_norm(&res[i, 0], &ad[i, 0], alpha, &ad[i, 0], 0.0, n)
     return total
 
 
@@ -510,15 +518,9 @@ def coarse_lanczos_residual(double complex[:, ::1] y, const double complex[:, ::
                             const double complex[:, ::1] previous, double a, double b,
                             const double[::1] weight):
     """``y -= a x + b previous`` (the Lanczos three-term step); returns ``sum weight |y|^2``."""
-    cdef Py_ssize_t i, j, m = y.shape[0], n = y.shape[1]
-    cdef double complex v
-    cdef double s, total = 0.0
+    cdef Py_ssize_t i, m = y.shape[0], n = y.shape[1]
+    cdef double total = 0.0
     with nogil:
         for i in range(m):
-            s = 0.0
-            for j in range(n):
-                v = y[i, j] - a * x[i, j] - b * previous[i, j]
-                y[i, j] = v
-                s += v.real * v.real + v.imag * v.imag
-            total += weight[i] * s
+            total += weight[i] * _less_norm(&y[i, 0], &x[i, 0], a, &previous[i, 0], b, n)
     return total
