@@ -102,7 +102,7 @@ way the result does not depend on the decomposition beyond round-off.
 import numpy as np
 from mpi4py import MPI
 
-from petgap.parallel.grid import DecompositionError, Grid, check_decomposition
+from petgap.parallel.grid import DecompositionError, Grid
 from petgap.solvers import _kernels as _k
 
 #: Pixels between coarse nodes (the side of a coarse cell).  The springs and the
@@ -158,15 +158,13 @@ def coarse_grid(grid, block):
     points or too few rows for the ranks.  Collective."""
     shape = (grid.nx // block, grid.ny // block)
     size = (grid.Lx, grid.Ly)
-    whole = grid.comm.size > 1 and shape[0] * shape[1] <= WHOLE_POINTS
-    if not whole:
-        try:
-            check_decomposition(grid.comm, *shape)
+    if grid.comm.size == 1 or shape[0] * shape[1] > WHOLE_POINTS:
+        try:   # Grid checks the decomposition first, on every rank alike
+            return Grid(shape, size=size, comm=grid.comm, planner=grid.planner,
+                        wisdom=grid.wisdom)
         except DecompositionError:
-            whole = True
-    if whole:
-        return Grid(shape, size=size, comm=MPI.COMM_SELF, planner="estimate", wisdom=False)
-    return Grid(shape, size=size, comm=grid.comm, planner=grid.planner, wisdom=grid.wisdom)
+            pass
+    return Grid(shape, size=size, comm=MPI.COMM_SELF, planner="estimate", wisdom=False)
 
 
 def block_for(shape):
@@ -244,9 +242,9 @@ class CoarseTerm:
     def __init__(self, grid, contact_modulus, block, mean_compliance=0.0):
         self.grid, self.block = grid, block
         self.x0 = grid.x_slice.start
-        self.coarse_shape = (grid.shape[0] // block, grid.shape[1] // block)
         #: The coarse system's grid (:func:`coarse_grid`).
         self.cgrid = cgrid = coarse_grid(grid, block)
+        self.coarse_shape = cgrid.shape
         self.split = cgrid.comm.size > 1      # the coarse slabs are parts, not the whole
         if self.split:
             width = self.coarse_shape[1]
@@ -258,8 +256,6 @@ class CoarseTerm:
         self.symbol = np.ascontiguousarray(symbol.T[cgrid.ky_slice])
         self.root_symbol = np.sqrt(self.symbol)   # H = Fc^{1/2}
         self.root_scaled = self.root_symbol / float(cgrid.npoints)   # with the pair's 1/N
-        # the half plane's rows that are their own mirrors (Parseval's sums, _dot)
-        self.own_mirror = np.flatnonzero(cgrid.hermitian_weight == 1.0)
         self.springs = np.zeros(cgrid.local_shape)
         self.rhs = np.zeros(cgrid.local_shape)
         self.contact = self.counts = None      # the contact's springs, and its counts then
@@ -339,17 +335,10 @@ class CoarseTerm:
         self.springs = self.contact + self.softening * free
 
     def _dot(self, a, b):
-        """``sum a b`` of two real coarse fields given by their spectra (Parseval, up to ``N``).
-
-        The half plane holds every other row once and its mirror implicitly: twice its
-        sum, less the rows that are their own mirrors (contiguous rows of the transposed
-        layout: a strided complex BLAS product, OpenBLAS 0.3.21's ``zdotc``, reads past
-        an array's end).  Summed over the ranks where the coarse grid is split.
-        """
-        dot = 2.0 * np.vdot(a, b).real
-        for row in self.own_mirror:
-            dot -= np.vdot(a[row], b[row]).real
-        return self._reduced(float(dot))
+        """``sum a b`` of two real coarse fields given by their spectra (Parseval, up to ``N``):
+        the half plane's rows weighted by the modes each stands for, summed over the ranks
+        where the coarse grid is split (:meth:`petgap.parallel.grid.Grid.fourier_sum`)."""
+        return self.cgrid.fourier_sum((np.conj(a) * b).real)
 
     def _reduced(self, local):
         """A sum over the coarse grid from this rank's part of it."""

@@ -403,6 +403,8 @@ def test_inner_products_of_a_large_coarse_grid(tmp_path):
     done = _in_fresh_process(tmp_path, """
         import mmap, types
         import numpy as np
+        from mpi4py import MPI
+        from petgap.parallel.grid import Grid
         from petgap.solvers.gap_two_level import CoarseTerm
 
         def at_mapping_end(values):
@@ -417,8 +419,8 @@ def test_inner_products_of_a_large_coarse_grid(tmp_path):
         for n in (1024, 512, 1022):
             x, y = rng.random((n, n)), rng.random((n, n))
             a, b = (at_mapping_end(np.ascontiguousarray(np.fft.rfft2(v).T)) for v in (x, y))
-            term = types.SimpleNamespace(own_mirror=(0, n // 2) if n % 2 == 0 else (0,),
-                                         _reduced=lambda local: local)
+            term = types.SimpleNamespace(cgrid=Grid((n, n), comm=MPI.COMM_SELF,
+                                                    planner="estimate", wisdom=False))
             dot = CoarseTerm._dot(term, a, b) / (n * n)
             assert abs(dot - float(np.sum(x * y))) <= 1e-10 * float(np.sum(x * y)), n
         print("ok")
