@@ -668,7 +668,8 @@ def gap_cg(problem, control, settings=SolverSettings(), *, initial_gap=None, mon
                                 negative_curvature=s.negative_curvature)
     if f.coarse is not None:
         solution.step_counts.update(coarse_iterations=f.coarse.inner_iterations,
-                                    coarse_clipped=f.coarse.clipped)
+                                    coarse_clipped=f.coarse.clipped,
+                                    coarse_lanczos_steps=f.coarse.lanczos_steps)
     return solution
 
 

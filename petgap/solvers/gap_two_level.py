@@ -133,8 +133,13 @@ RESPRING = 0.002
 #: (module docstring).  Near zero the term amplifies a mode the true operator holds stiff;
 #: 0.2 costs a sticky solve an iteration or two more than 0.1 (docs/design.md).
 MARGIN = 0.1
-#: Lanczos steps of the estimate of that eigenvalue (a fraction of one inner solve's cost).
+#: Most Lanczos steps of the estimate of that eigenvalue (a fraction of one inner solve's
+#: cost), and the Ritz residual it stops at: a hundredth of :data:`MARGIN`, so that the
+#: softened system's smallest eigenvalue lands within that of the margin.
 LANCZOS_STEPS = 40
+LANCZOS_TOLERANCE = 1e-3
+#: Share (in norm) of the fixed random field in a Lanczos start from the last Ritz vector.
+LANCZOS_MIX = 0.3
 #: The softening's scale after a coarse system still found indefinite, and the scale below
 #: which the softening is left out (the springs clipped at zero).
 BACKOFF = 0.8
@@ -185,6 +190,11 @@ def softening_for(smallest):
     if smallest >= MARGIN:
         return 1.0
     return (1.0 - MARGIN) / (1.0 - smallest)
+
+
+def _tridiagonal(diagonal, offdiagonal):
+    """The symmetric tridiagonal matrix of a Lanczos recurrence."""
+    return np.diag(diagonal) + np.diag(offdiagonal, 1) + np.diag(offdiagonal, -1)
 
 
 def _hat_spectrum(k, n, b):
@@ -260,8 +270,9 @@ class CoarseTerm:
         self.rhs = np.zeros(cgrid.local_shape)
         self.contact = self.counts = None      # the contact's springs, and its counts then
         self.softening = 1.0                   # theta of the module docstring
+        self.ritz = self.noise = None          # the Lanczos estimate's last Ritz vector, start
         self.stale = True
-        self.inner_iterations = self.clipped = self.respring = 0
+        self.inner_iterations = self.clipped = self.respring = self.lanczos_steps = 0
 
     def _restricted(self, local):
         """This rank's coarse rows of the sum over the ranks of ``local`` (whole coarse
@@ -347,29 +358,67 @@ class CoarseTerm:
     def smallest_eigenvalue(self, springs):
         """Lanczos estimate (from above) of the smallest eigenvalue of ``I + H W H``.
 
-        :data:`LANCZOS_STEPS` steps from a fixed random field, the same on every rank
-        count: one transform pair of the coarse grid a step, and the fused passes of the
-        conjugate gradients (:meth:`_solve`).
+        The first estimate starts from a fixed random field, the same on every rank
+        count; each later one from the last estimate's Ritz vector with
+        :data:`LANCZOS_MIX` of that field.  Why: between two estimates the contact's
+        springs have moved by a fraction of a per cent of its points, so the last Ritz
+        vector is nearly the new one, and Lanczos from it converges in a few steps where
+        the random start takes thirty to forty; the random share keeps a softer mode
+        that has appeared elsewhere (a patch grown) within the recurrence's reach.  The
+        recurrence stops once the Ritz pair's residual is below
+        :data:`LANCZOS_TOLERANCE` (or after :data:`LANCZOS_STEPS` steps); a second run
+        of it, the same vectors bit for bit, sums the Ritz vector, so that no Lanczos
+        vector is held.  A step costs one transform pair of the coarse grid and the
+        fused passes of the conjugate gradients (:meth:`_solve`).
+        """
+        if self.noise is None:
+            rng = np.random.default_rng(LANCZOS_SEED)
+            self.noise = self.spectrum(rng.standard_normal(self.coarse_shape)[self.cgrid.x_slice])
+            self.noise /= np.sqrt(self._dot(self.noise, self.noise))
+        start = self.noise.copy()
+        if self.ritz is not None:
+            start *= LANCZOS_MIX
+            start += self.ritz * (1.0 / np.sqrt(self._dot(self.ritz, self.ritz)))
+        diagonal, offdiagonal = self._lanczos(springs, start)
+        values, vectors = np.linalg.eigh(_tridiagonal(diagonal, offdiagonal))
+        self.ritz = self._lanczos(springs, start, vectors[:, 0])
+        return float(values[0])
+
+    def _lanczos(self, springs, x, coefficients=None):
+        """The Lanczos recurrence from ``x`` (a spectrum, left as it is).
+
+        Without ``coefficients``: ``(diagonal, offdiagonal)`` of the tridiagonal matrix,
+        its steps ended by the Ritz residual (:meth:`smallest_eigenvalue`).  With them:
+        ``sum_i coefficients[i] x_i`` over as many steps, the recurrence's vectors.
         """
         weight = self.cgrid.hermitian_weight
-        rng = np.random.default_rng(LANCZOS_SEED)
-        x = self.spectrum(rng.standard_normal(self.coarse_shape)[self.cgrid.x_slice])
-        x /= np.sqrt(self._dot(x, x))
+        x = x * (1.0 / np.sqrt(self._dot(x, x)))
         previous, y, off = np.zeros_like(x), np.empty_like(x), 0.0
         diagonal, offdiagonal = [], []
-        for _ in range(LANCZOS_STEPS):
+        steps = LANCZOS_STEPS if coefficients is None else len(coefficients)
+        total = None if coefficients is None else coefficients[0] * x
+        for k in range(1, steps + 1):
+            if coefficients is not None and k > 1:
+                total += coefficients[k - 1] * x
+            if k == steps and coefficients is not None:
+                break
             a = self._reduced(_k.coarse_cg_image(self._image(springs, x), self.root_scaled,
                                                  x, y, weight))
+            self.lanczos_steps += 1
             diagonal.append(a)
             off = np.sqrt(self._reduced(_k.coarse_lanczos_residual(y, x, previous, a, off,
                                                                    weight)))
-            if not off > 1e-12 * abs(a) or len(diagonal) == LANCZOS_STEPS:
-                break
+            if coefficients is None:
+                if not off > 1e-12 * abs(a) or k == steps:
+                    break
+                if k > 1:
+                    _, vectors = np.linalg.eigh(_tridiagonal(diagonal, offdiagonal))
+                    if off * abs(vectors[-1, 0]) <= LANCZOS_TOLERANCE:
+                        break
             offdiagonal.append(off)
             y *= 1.0 / off
             previous, x, y = x, y, previous
-        tridiagonal = (np.diag(diagonal) + np.diag(offdiagonal, 1) + np.diag(offdiagonal, -1))
-        return float(np.linalg.eigvalsh(tridiagonal)[0])
+        return (diagonal, offdiagonal) if coefficients is None else total
 
     def _image(self, springs, x=None):
         """``FFT(W IFFT(H x))``, unnormalised, in the coarse grid's Fourier buffer: one
