@@ -8,7 +8,8 @@ the GUIDE surface of each size (H = 0.8, lambda_min = 32 a0, lambda_max = L / 2,
 the two-level preconditioner), under ``MeanGap`` at the non-adhesive mean gap or, with
 ``--load``, under ``Load(0.002)``, once for each ``--tolerances`` value of
 ``petgap.solvers.gap_two_level.INNER_TOLERANCE``.  A cell is the outer iterations / the
-coarse system's inner iterations (the coarse-grid start's levels included) and the solve's
+coarse system's inner iterations (the coarse-grid start's levels included), its Lanczos
+steps in brackets (both runs of the recurrence, the levels included), and the solve's
 wall seconds; every solve runs in a process of its own.
 
 Usage::
@@ -43,6 +44,7 @@ def worker(n, work, rho, tolerance, load):
     solution = petgap.solve(adhesive, control, tolerance=1e-8)
     print(json.dumps(dict(its=solution.iterations, reason=solution.reason,
                           inner=solution.step_counts["coarse_iterations"],
+                          lanczos=solution.step_counts["coarse_lanczos_steps"],
                           seconds=time.perf_counter() - started)))
 
 
@@ -72,7 +74,8 @@ def main():
                     capture_output=True, text=True, check=True).stdout
                 r = json.loads(out.strip().splitlines()[-1])
                 verdict = "" if r["reason"] == "converged_kkt" else f" ({r['reason']})"
-                cells.append(f"{r['its']} / {r['inner']}, {r['seconds']:.1f} s{verdict}")
+                cells.append(f"{r['its']} / {r['inner']} ({r['lanczos']}), "
+                             f"{r['seconds']:.1f} s{verdict}")
             print(f"| {n}^2, {work:g} | " + " | ".join(cells) + " |", flush=True)
 
 
