@@ -80,7 +80,8 @@ no transform of the fine grid but the contact's springs.  Those are
 ``R (1_C K 1_C)`` itself, one transform pair
 of the fine grid, formed again only once the contact has moved by more than
 :data:`RESPRING` of its points (counted per coarse cell in the residual's pass),
-and with them the softening's scale (:data:`LANCZOS_STEPS` pairs of the coarse grid):
+and with them the softening's scale (a Lanczos estimate: a few pairs of the coarse grid
+from the last estimate's Ritz vector, up to :data:`LANCZOS_STEPS` the first time):
 in the flat middle of a solve, when the set has settled, none.  Why the contact's
 own and not an estimate from its edge: where the interface is sticky the coarse
 model sees the balance of the springs and the softening cell by cell, and an
