@@ -38,8 +38,9 @@ from petgap.parallel.grid import Grid
 from petgap.solvers import _kernels as _k
 from petgap.solvers.gap_cg import gap_cg
 from petgap.solvers import gap_two_level
-from petgap.solvers.gap_two_level import (INNER_TOLERANCE, LANCZOS_TOLERANCE, MARGIN, CoarseTerm, block_for,
-                                          coarse_compliance, coarse_grid, softening_for)
+from petgap.solvers.gap_two_level import (INNER_TOLERANCE, LANCZOS_TOLERANCE, MARGIN,
+                                          CoarseTerm, block_for, coarse_compliance,
+                                          coarse_grid, softening_for)
 from petgap.solvers.settings import SolverSettings
 from petgap.surfaces.self_affine import self_affine
 
