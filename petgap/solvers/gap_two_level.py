@@ -92,7 +92,7 @@ The coarse system lives on a grid of its own (:func:`coarse_grid`) with petgap's
 FFTW-MPI transforms, split over the fine grid's ranks: the fine slabs' sums are
 reduced onto the coarse slabs, each rank iterates on its part of the spectrum, and
 the correction is gathered whole for the prolongation.  Why not solved whole on every
-rank: on the sticky side it costs forty to eighty coarse pairs per fine iteration, a
+rank: on the sticky side it costs some twenty coarse pairs per fine iteration, a
 share of the solve that a copy on every rank would keep while the ranks share the fine
 grid's work.  Coarse grids of at most
 :data:`WHOLE_POINTS` points (or too few rows for the ranks) are solved whole on every
@@ -110,11 +110,11 @@ from petgap.solvers import _kernels as _k
 #: softening of one patch's edge must fall into cells of their own for the coarse model to
 #: see their balance: on the sticky side cells of 16 took a quarter to a half more
 #: iterations (docs/design.md).  Smaller cells would give the coarse system four times the
-#: nodes, and its forty-odd transform pairs per fine iteration would cost more than the fine
-#: grid's two.
+#: nodes, and its twenty-odd transform pairs per fine iteration, each on a sixteenth of the
+#: fine grid's points, would cost about as much as the fine grid's two.
 BLOCK = 8
 #: The coarse grid has at most this many nodes a side, larger cells beyond (past 8192^2),
-#: so that its forty-odd transform pairs per fine iteration stay a fraction of the fine pair.
+#: so that its twenty-odd transform pairs per fine iteration stay a fraction of the fine pair.
 MAX_SIDE = 1024
 #: With fewer nodes a side the cell is too small for the term to matter.
 MIN_SIDE = 4
