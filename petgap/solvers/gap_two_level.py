@@ -381,46 +381,38 @@ class CoarseTerm:
         if self.ritz is not None:
             start *= LANCZOS_MIX
             start += self.ritz * (1.0 / np.sqrt(self._dot(self.ritz, self.ritz)))
-        diagonal, offdiagonal = self._lanczos(springs, start)
+        diagonal, offdiagonal = [], []
+        for _, a, off in self._lanczos(springs, start):
+            diagonal.append(a)
+            if len(diagonal) == LANCZOS_STEPS or not off > 1e-12 * abs(a):
+                break
+            if len(diagonal) > 1:
+                _, vectors = np.linalg.eigh(_tridiagonal(diagonal, offdiagonal))
+                if off * abs(vectors[-1, 0]) <= LANCZOS_TOLERANCE:   # the Ritz residual
+                    break
+            offdiagonal.append(off)
         values, vectors = np.linalg.eigh(_tridiagonal(diagonal, offdiagonal))
-        self.ritz = self._lanczos(springs, start, vectors[:, 0])
+        self.ritz = np.zeros_like(start)
+        for c, (x, _, _) in zip(vectors[:, 0], self._lanczos(springs, start)):
+            self.ritz += c * x
         return float(values[0])
 
-    def _lanczos(self, springs, x, coefficients=None):
-        """The Lanczos recurrence from ``x`` (a spectrum, left as it is).
-
-        Without ``coefficients``: ``(diagonal, offdiagonal)`` of the tridiagonal matrix,
-        its steps ended by the Ritz residual (:meth:`smallest_eigenvalue`).  With them:
-        ``sum_i coefficients[i] x_i`` over as many steps, the recurrence's vectors.
-        """
+    def _lanczos(self, springs, x):
+        """The Lanczos recurrence of ``I + H W H`` from ``x`` (a spectrum, left as it is):
+        yields each step's unit vector ``x_k``, ``x_k . (I + H W H) x_k`` and the norm of
+        the next vector before its normalisation (a buffer the next step overwrites)."""
         weight = self.cgrid.hermitian_weight
         x = x * (1.0 / np.sqrt(self._dot(x, x)))
         previous, y, off = np.zeros_like(x), np.empty_like(x), 0.0
-        diagonal, offdiagonal = [], []
-        steps = LANCZOS_STEPS if coefficients is None else len(coefficients)
-        total = None if coefficients is None else coefficients[0] * x
-        for k in range(1, steps + 1):
-            if coefficients is not None and k > 1:
-                total += coefficients[k - 1] * x
-            if k == steps and coefficients is not None:
-                break
+        while True:
             a = self._reduced(_k.coarse_cg_image(self._image(springs, x), self.root_scaled,
                                                  x, y, weight))
             self.lanczos_steps += 1
-            diagonal.append(a)
             off = np.sqrt(self._reduced(_k.coarse_lanczos_residual(y, x, previous, a, off,
                                                                    weight)))
-            if coefficients is None:
-                if not off > 1e-12 * abs(a) or k == steps:
-                    break
-                if k > 1:
-                    _, vectors = np.linalg.eigh(_tridiagonal(diagonal, offdiagonal))
-                    if off * abs(vectors[-1, 0]) <= LANCZOS_TOLERANCE:
-                        break
-            offdiagonal.append(off)
+            yield x, a, off
             y *= 1.0 / off
             previous, x, y = x, y, previous
-        return (diagonal, offdiagonal) if coefficients is None else total
 
     def _image(self, springs, x=None):
         """``FFT(W IFFT(H x))``, unnormalised, in the coarse grid's Fourier buffer: one
