@@ -245,7 +245,8 @@ def test_the_next_estimate_starts_from_the_last_ritz_vector():
     """After a small change of the springs (a few per cent of them), the estimate starts
     from the last Ritz vector and takes a fraction of the first one's steps; after a
     change that puts a softer mode where the last Ritz vector has least weight (one
-    node's softening made thirty times stronger), the estimate still finds it.  Both within :data:`LANCZOS_TOLERANCE` of the dense estimate, from above."""
+    node's softening made thirty times stronger), the estimate still finds it.  Both
+    within :data:`LANCZOS_TOLERANCE` of the dense estimate, from above."""
     term = CoarseTerm(Grid((256, 256), size=(1.0, 1.0), comm=MPI.COMM_SELF,
                            planner="estimate"), E_STAR, 8)
     contact, free = sticky_springs(term, 10.0)
